@@ -1,0 +1,24 @@
+"""cmm_dae: constrained metamorphic mechanisms as index-reduced DAEs on SUNDIALS IDA.
+
+Public API::
+
+    mech = cmm_dae.load("models/slider_crank.toml")
+    res = cmm_dae.run_dae(mech, t_end=10.0, rtol=1e-8, atol=1e-10, output_dt=0.01)
+    res.driver("A").effort, res.joint("B").force, res.events, res.stats
+"""
+
+from .dae import run_dae
+from .equations import Model
+from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError
+from .loader import from_dict, load
+from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
+from .result import Configuration, Event, Result, Stats, load_result
+from .structure import labeller
+
+__all__ = [
+    "AssemblyError", "Body", "CmmError", "Configuration", "Damper", "Driver", "Event",
+    "Initial", "Joint", "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result",
+    "SolverError", "Spring", "Stats", "from_dict", "labeller", "load", "load_result",
+    "run_dae",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,142 @@
+"""Consistent initial values by the package's own linear algebra.
+
+Positions by Newton from the known joint coordinates and the pose guesses, velocities from
+the velocity constraints and the known joint rates, accelerations and multipliers from the
+KKT system. A loop that cannot close, or a redundant or singular constraint set, is an
+:class:`AssemblyError` naming the joints and the residual; nothing is least-squared silently.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .equations import Model
+from .errors import AssemblyError, ModelError, Problem
+
+#: Position residual (m or rad) below which a loop counts as closed.
+CLOSE_TOL = 1e-10
+#: Ratio of smallest to largest singular value below which constraints count as singular.
+SINGULAR_TOL = 1e-9
+
+
+def initial_guess(model: Model) -> np.ndarray:
+    """Centroid coordinates from the bodies' frame-pose guesses (zeros where none)."""
+    q = np.zeros(model.nq)
+    for i, b in enumerate(model.mech.bodies.values()):
+        x, y, th = b.guess if b.guess is not None else (0.0, 0.0, 0.0)
+        c, s = np.cos(th), np.sin(th)
+        cx, cy = b.centroid
+        q[3 * i:3 * i + 3] = (x + c * cx - s * cy, y + s * cx + c * cy, th)
+    return q
+
+
+def _active_rows(model: Model, p: np.ndarray) -> np.ndarray:
+    free = np.asarray(model.free_fn(p)).ravel()
+    return np.flatnonzero(free == 0.0)
+
+
+def _labels(model: Model, rows, known: list[str]) -> list[str]:
+    out = []
+    for i in rows:
+        if i < len(model.rows):
+            r = model.rows[i]
+            out.append(f"{r.kind} {r.name}" if r.kind != "joint" else f"joint {r.name}")
+        else:
+            out.append(f"[initial] joints.{known[i - len(model.rows)]}")
+    return out
+
+
+def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, float],
+                       q_guess: np.ndarray) -> np.ndarray:
+    """Solve the position equations plus ``c_j(q) = known[j]`` for q.
+
+    Raises
+    ------
+    ModelError
+        The number of equations does not match the number of coordinates.
+    AssemblyError
+        The loop does not close (residual named) or the equations are singular.
+    """
+    act = _active_rows(model, p)
+    names = list(known)
+    kidx = [model.jidx[n] for n in names]
+    vals = np.array([known[n] for n in names])
+    n_eq = len(act) + len(names)
+    if n_eq != model.nq:
+        dof = model.nq - len(act)
+        raise ModelError(Problem(
+            "initial", "joints",
+            f"the mechanism has {dof} free degree(s) of freedom at t = {t:g} s "
+            f"({model.nq} coordinates, {len(act)} constraint rows), so [initial] joints must "
+            f"name {dof} non-driven joint coordinate(s); it names {len(names)}"
+            + (f" ({', '.join(names)})" if names else "")), model.mech.source)
+
+    def fun(q):
+        phi, Phi_q, _ = model.phi_fn(q, t, p)
+        c, _, c_q = model.coord_fn(q, np.zeros(model.nq))
+        r = np.concatenate([np.asarray(phi).ravel()[act], np.asarray(c).ravel()[kidx] - vals])
+        J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
+        return r, J
+
+    q = np.array(q_guess, float)
+    r, J = fun(q)
+    if np.max(np.abs(r), initial=0.0) > 1e-6:
+        sol = least_squares(lambda x: fun(x)[0], q, jac=lambda x: fun(x)[1], method="lm",
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
+        q = sol.x
+    for _ in range(20):  # Newton polish to machine precision
+        r, J = fun(q)
+        if np.max(np.abs(r), initial=0.0) < 1e-14:
+            break
+        try:
+            q = q - np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:
+            break
+    r, J = fun(q)
+    res = float(np.max(np.abs(r), initial=0.0))
+    if res > CLOSE_TOL:
+        worst = np.argsort(-np.abs(r))[:4]
+        labels = sorted(set(_labels(model, act[worst[worst < len(act)]], names)))
+        raise AssemblyError(
+            f"the mechanism cannot be assembled at t = {t:g} s: the loop through "
+            f"{', '.join(labels) or 'the given coordinates'} does not close "
+            f"(largest residual {res:.3g} m or rad). Check the lengths, the [initial] joint "
+            "coordinates and the bodies' pose guesses.",
+            joints=[lab.split()[-1] for lab in labels], residual=res)
+    check_rank(model, J, act, names, t)
+    return q
+
+
+def check_rank(model: Model, J: np.ndarray, act, names: list[str], t: float) -> None:
+    """Raise AssemblyError naming the rows of a singular (redundant) square system."""
+    U, s, _ = np.linalg.svd(J)
+    if s.size and s[-1] < SINGULAR_TOL * s[0]:
+        w = U[:, -1]
+        rows = np.flatnonzero(np.abs(w) > 0.05 * np.max(np.abs(w)))
+        idx = list(act) + list(range(len(model.rows), len(model.rows) + len(names)))
+        labels = sorted(set(_labels(model, [idx[i] for i in rows], names)))
+        raise AssemblyError(
+            f"the constraint equations are redundant or singular at t = {t:g} s "
+            f"(smallest singular value {s[-1]:.3g}, largest {s[0]:.3g}); involved: "
+            f"{', '.join(labels)}. A redundant joint, a dead point or a coordinate "
+            "that does not fix the free motion can cause this.",
+            joints=[lab.split()[-1] for lab in labels], residual=float(s[-1]))
+
+
+def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                        rates: dict[str, float]) -> np.ndarray:
+    """Solve ``Phi_q v = -Phi_t`` plus ``c_j' = rates[j]`` for v."""
+    act = _active_rows(model, p)
+    names = list(rates)
+    kidx = [model.jidx[n] for n in names]
+    zero = np.zeros(model.nq)
+    _, Phi_q, h0 = model.phi_fn(q, t, p)  # h(q, 0, t) = Phi_t
+    _, _, c_q = model.coord_fn(q, zero)
+    J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
+    rhs = np.concatenate([-np.asarray(h0).ravel()[act], [rates[n] for n in names]])
+    if J.shape[0] != J.shape[1]:
+        raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
+                                 f"joint rates, got {len(names)}"), model.mech.source)
+    check_rank(model, J, act, names, t)
+    return np.linalg.solve(J, rhs)

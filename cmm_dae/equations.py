@@ -1,0 +1,235 @@
+"""The unified Newton-Euler model in absolute coordinates, built once with CasADi.
+
+Each body has ``q_i = (x, y, theta)`` of its centroid, so the mass matrix is constant and
+diagonal. Constraint rows, in this order:
+
+* every joint: revolute ``r_P2 - r_P1`` (2 rows); prismatic ``theta2 - theta1 - angle`` and
+  ``n1 . (r_P2 - r_P1)`` (2 rows);
+* every driver: ``c(q) - f(t)`` (1 row);
+* every limited (metamorphic) joint: a lock row ``a_k (c(q) - L_k)`` switched by the
+  parameter vector ``p = [a_1..a_K, L_1..L_K]`` (``a_k`` = 1 locked, 0 free).
+
+The equations of motion are ``M q'' + Phi_q^T lambda = Q(q, q', t)``, the paper's Eq. (10) for
+all bodies at once; the multipliers are the physical constraint forces (the generalized force
+of a row on the bodies is ``-Phi_q^T lambda``). An inactive lock row gets the trivial
+equation ``lambda_k = 0`` (``mu_k = 0``), so every configuration shares one residual and one
+Jacobian.
+
+This is the only module besides ``dae`` that imports CasADi.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from .mechanism import GROUND, Driver, Mechanism
+
+
+def _rot(th):
+    c, s = ca.cos(th), ca.sin(th)
+    return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
+
+
+def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
+    """The prescribed coordinate f(t) of a driver as a CasADi expression."""
+    if d.motion == "constant_speed":
+        return d.initial + d.speed * t
+    if d.motion == "polynomial":
+        return sum(c * t**k for k, c in enumerate(d.coefficients))
+    if d.motion == "harmonic":
+        return d.initial + d.amplitude * ca.sin(2 * np.pi * d.frequency * t + d.phase)
+    # Clamped cubic spline (zero end slopes): C2 inside the table.
+    sp = CubicSpline(np.array(d.times), np.array(d.values), bc_type="clamped")
+    f = None
+    for i, t0 in enumerate(sp.x[:-1]):
+        c = sp.c[:, i]
+        s = t - t0
+        piece = ((c[0] * s + c[1]) * s + c[2]) * s + c[3]
+        f = piece if f is None else ca.if_else(t >= t0, piece, f)
+    return f
+
+
+@dataclass(frozen=True)
+class Row:
+    """One constraint row: what it belongs to (``joint``, ``driver`` or ``lock``) and whose."""
+
+    kind: str
+    name: str
+
+
+class Model:
+    """Symbolic model of a mechanism and its compiled CasADi functions.
+
+    Attributes
+    ----------
+    nq : int
+        Number of absolute coordinates (3 per body).
+    m : int
+        Number of constraint rows (joint, driver and lock rows).
+    rows : list[Row]
+        What each row belongs to.
+    locks : list[str]
+        Limited joints, in the order of their lock rows and of ``p``.
+    """
+
+    def __init__(self, mech: Mechanism):
+        self.mech = mech
+        self.body_names = list(mech.bodies)
+        self.joint_names = list(mech.joints)
+        self.driver_names = list(mech.drivers)
+        self.locks = mech.limited_joints
+        nb = len(self.body_names)
+        self.nq = nq = 3 * nb
+        self.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
+        for i, b in enumerate(mech.bodies.values()):
+            self.mass[3 * i + 2] = b.inertia
+        self.bidx = {n: i for i, n in enumerate(self.body_names)}
+
+        q = ca.SX.sym("q", nq)
+        v = ca.SX.sym("v", nq)
+        a = ca.SX.sym("a", nq)
+        t = ca.SX.sym("t")
+        nl = len(self.locks)
+        p = ca.SX.sym("p", 2 * nl)
+        self._sym = (q, v, t, p)
+
+        def angle(body):
+            return 0.0 if body == GROUND else q[3 * self.bidx[body] + 2]
+
+        def point(ref):
+            body, _ = ref.split(".", 1)
+            local = np.array(mech.point(ref))
+            if body == GROUND:
+                return ca.DM(local)
+            i = self.bidx[body]
+            c = np.array(mech.bodies[body].centroid)
+            return q[3 * i:3 * i + 2] + _rot(q[3 * i + 2]) @ ca.DM(local - c)
+
+        coords = []
+        rows: list[ca.SX] = []
+        self.rows: list[Row] = []
+        for name, j in mech.joints.items():
+            d = point(j.second) - point(j.first)
+            dth = angle(j.second_body) - angle(j.first_body)
+            if j.type == "revolute":
+                coords.append(dth)
+                rows += [d[0], d[1]]
+            else:
+                u = np.array(j.axis, float) / np.hypot(*j.axis)
+                ua = _rot(angle(j.first_body)) @ ca.DM(u)
+                na = ca.vertcat(-ua[1], ua[0])
+                coords.append(ca.dot(ua, d))
+                rows += [dth - j.angle, ca.dot(na, d)]
+            self.rows += [Row("joint", name), Row("joint", name)]
+        c = ca.vertcat(*coords)
+        jidx = {n: i for i, n in enumerate(self.joint_names)}
+        self.jidx = jidx
+        for name, d in mech.drivers.items():
+            rows.append(c[jidx[name]] - driver_expr(d, t))
+            self.rows.append(Row("driver", name))
+        for k, name in enumerate(self.locks):
+            rows.append(p[k] * (c[jidx[name]] - p[nl + k]))
+            self.rows.append(Row("lock", name))
+        self.m = m = len(rows)
+        self.n_fixed = m - nl
+        phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
+        free = ca.vertcat(ca.SX.zeros(m - nl), 1 - p[:nl]) if nl else ca.SX.zeros(m)
+
+        Phi_q = ca.jacobian(phi, q)
+        Phi_t = ca.jacobian(phi, t)
+        h = Phi_q @ v + Phi_t
+        gamma = -(ca.jacobian(h, q) @ v + ca.jacobian(h, t))
+
+        # Generalized applied forces: gravity, then springs and dampers on joint coordinates.
+        Qf = ca.SX.zeros(nq)
+        g = mech.gravity
+        for i, b in enumerate(mech.bodies.values()):
+            Qf[3 * i] += b.mass * g[0]
+            Qf[3 * i + 1] += b.mass * g[1]
+        c_q = ca.jacobian(c, q)
+        cdot = c_q @ v
+        V = 0.0
+        for name, j in mech.joints.items():
+            k = jidx[name]
+            gen = 0.0
+            if j.spring is not None:
+                gen -= j.spring.stiffness * (c[k] - j.spring.rest)
+                V += 0.5 * j.spring.stiffness * (c[k] - j.spring.rest) ** 2
+            if j.damper is not None:
+                gen -= j.damper.damping * cdot[k]
+            if not (isinstance(gen, float) and gen == 0.0):
+                Qf += c_q[k, :].T * gen
+        for i, b in enumerate(mech.bodies.values()):
+            V -= b.mass * (g[0] * q[3 * i] + g[1] * q[3 * i + 1])
+        cddot = c_q @ a + ca.jacobian(cdot, q) @ v
+
+        # Points where joint forces are reported: each joint's second (or first) connect point.
+        ref_pts = []
+        for j in mech.joints.values():
+            ref_pts.append(point(j.second))
+        P = ca.horzcat(*ref_pts) if ref_pts else ca.SX(2, 0)
+
+        Mdiag = ca.DM(self.mass)
+        self.phi_fn = ca.Function("phi", [q, t, p], [phi, ca.densify(Phi_q), ca.densify(Phi_t)])
+        self.coord_fn = ca.Function("coord", [q, v], [c, cdot, ca.densify(c_q)])
+        self.kkt_fn = ca.Function("kkt", [q, v, t, p], [ca.densify(Phi_q), Qf, gamma])
+        self.post_fn = ca.Function("post", [q, v, a, t], [c, cdot, cddot, ca.densify(P)])
+        self.energy_fn = ca.Function("energy", [q], [V])
+        self.free_fn = ca.Function("free", [p], [ca.densify(free)])
+
+        # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
+        lam = ca.SX.sym("lam", m)
+        mu = ca.SX.sym("mu", m)
+        y = ca.vertcat(q, v, lam, mu)
+        yp = ca.SX.sym("yp", y.numel())
+        cj = ca.SX.sym("cj")
+        qp, vp = yp[:nq], yp[nq:2 * nq]
+        F = ca.vertcat(qp - v + Phi_q.T @ mu,
+                       Mdiag * vp + Phi_q.T @ lam - Qf,
+                       phi + free * mu,
+                       h + free * lam)
+        J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
+        self.N = int(y.numel())
+        self.res_fn = ca.Function("res", [t, y, yp, p], [F])
+        # Transposed: CasADi writes column-major, scikit-sundae's JJ is row-major.
+        self.jac_fn = ca.Function("resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
+        self.n_alg = 2 * m
+
+    # ------------------------------------------------------------------ helpers
+    def params(self, locked: dict[str, float] | None = None) -> np.ndarray:
+        """Parameter vector for a configuration: ``locked`` maps joint -> lock value."""
+        nl = len(self.locks)
+        p = np.zeros(2 * nl)
+        for name, val in (locked or {}).items():
+            k = self.locks.index(name)
+            p[k] = 1.0
+            p[nl + k] = val
+        return p
+
+    def rows_of(self, kind: str, name: str) -> list[int]:
+        """Indices of the rows of one joint, driver or lock."""
+        return [i for i, r in enumerate(self.rows) if r.kind == kind and r.name == name]
+
+    def kkt(self, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accelerations, multipliers and Phi_q from ``[[M, Phi_q^T], [Phi_q, D]]``.
+
+        ``D`` is 1 on the diagonal of inactive lock rows (their multiplier is 0).
+        """
+        Phi_q, Qf, gamma = (np.asarray(x) for x in self.kkt_fn(q, v, t, p))
+        A = self.kkt_matrix(Phi_q, p)
+        sol = np.linalg.solve(A, np.concatenate([Qf.ravel(), gamma.ravel()]))
+        return sol[:self.nq], sol[self.nq:], Phi_q
+
+    def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:
+        nq, m = self.nq, self.m
+        A = np.zeros((nq + m, nq + m))
+        A[:nq, :nq] = np.diag(self.mass)
+        A[:nq, nq:] = Phi_q.T
+        A[nq:, :nq] = Phi_q
+        A[nq:, nq:] = np.diag(np.asarray(self.free_fn(p)).ravel())
+        return A

@@ -1,0 +1,199 @@
+"""Hybrid logic shared by both integrators: configurations, impact map, lock and release.
+
+A configuration is the set of locked metamorphic joints. This module decides what happens
+at a limit (impact map, bounce or lock, Zeno guard, immediate release when the stop would
+have to pull) and at a release, and keeps the registry of configurations with the paper's
+labels. It knows the equations (:class:`Model`) but not the integrator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .equations import Model
+from .result import Configuration, Event
+
+#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s.
+ZENO_DT = 1e-9
+
+
+@dataclass
+class HybridState:
+    """The locked joints (joint -> side) and the registry of configurations met so far."""
+
+    model: Model
+    labeller: object = None  # callable(locked: dict[str, str]) -> (label, dof)
+    locked: dict[str, str] = field(default_factory=dict)
+    configurations: list[Configuration] = field(default_factory=list)
+    params: list[np.ndarray] = field(default_factory=list)
+    _index: dict[tuple, int] = field(default_factory=dict)
+
+    def limit_value(self, joint: str, side: str) -> float:
+        lim = self.model.mech.joints[joint].limits
+        return lim.lower if side == "lower" else lim.upper
+
+    def current(self) -> int:
+        """Index of the configuration of the current locked set (registered on first use)."""
+        key = tuple(sorted(self.locked.items()))
+        if key not in self._index:
+            locked = dict(key)
+            label, dof = self.labeller(locked) if self.labeller else ("", 0)
+            self._index[key] = len(self.configurations)
+            self.configurations.append(Configuration(
+                tuple(locked), tuple(locked.values()), dof, label))
+            self.params.append(self.model.params(
+                {j: self.limit_value(j, s) for j, s in locked.items()}))
+        return self._index[key]
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.params[self.current()]
+
+    def push(self, lam: np.ndarray, joint: str) -> float:
+        """Force/torque with which the stop of a locked joint pushes it (>= 0 while held).
+
+        The lock row is ``c - L``; the generalized force on the second body along the joint
+        is ``-lambda``, which the lower stop must give positive and the upper stop negative.
+        """
+        k = self.model.n_fixed + self.model.locks.index(joint)
+        return -lam[k] if self.locked[joint] == "lower" else lam[k]
+
+
+def event_values(hs: HybridState, c: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Values of the event functions of the current configuration (see :func:`event_list`)."""
+    out = []
+    for joint, side, kind in event_list(hs):
+        if kind == "gap":
+            L = hs.limit_value(joint, side)
+            k = hs.model.jidx[joint]
+            out.append(c[k] - L if side == "lower" else L - c[k])
+        else:
+            out.append(hs.push(lam, joint))
+    return np.array(out)
+
+
+def event_list(hs: HybridState) -> list[tuple[str, str, str]]:
+    """(joint, side, kind) of each event function: ``gap`` for each open limit side of an
+    unlocked joint, ``push`` for each locked joint. All cross zero downwards."""
+    out = []
+    for name in hs.model.locks:
+        if name in hs.locked:
+            out.append((name, hs.locked[name], "push"))
+            continue
+        lim = hs.model.mech.joints[name].limits
+        if lim.lower is not None:
+            out.append((name, "lower", "gap"))
+        if lim.upper is not None:
+            out.append((name, "upper", "gap"))
+    return out
+
+
+def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> np.ndarray:
+    """Minimal-norm Newton projection of q onto the active position constraints."""
+    free = np.asarray(model.free_fn(p)).ravel()
+    act = np.flatnonzero(free == 0.0)
+    for _ in range(10):
+        phi, Phi_q, _ = model.phi_fn(q, t, p)
+        r = np.asarray(phi).ravel()[act]
+        if np.max(np.abs(r), initial=0.0) < 1e-15:
+            break
+        J = np.asarray(Phi_q)[act]
+        q = q - J.T @ np.linalg.solve(J @ J.T, r)
+    return q
+
+
+def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+               lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
+    """Post-impact velocities and impulses.
+
+    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
+    prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
+    Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
+    """
+    _, Phi_q, h0 = model.phi_fn(q, t, p)
+    Phi_q = np.asarray(Phi_q)
+    b = -np.asarray(h0).ravel()  # -Phi_t: drivers keep their velocity, locks keep 0
+    free = np.asarray(model.free_fn(p)).ravel()
+    b[free != 0.0] = 0.0
+    if lock_row is not None:
+        b[lock_row] = target
+    A = model.kkt_matrix(Phi_q, p)
+    rhs = np.concatenate([model.mass * v, b])
+    sol = np.linalg.solve(A, rhs)
+    return sol[:model.nq], sol[model.nq:]
+
+
+@dataclass
+class LimitOutcome:
+    """What a limit event does: the new velocities, the event record, whether it locked."""
+
+    v: np.ndarray
+    event: Event
+    locked: bool
+    released_at_once: bool = False
+
+
+def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str, side: str,
+             v_lock: float, last_bounce: float | None) -> LimitOutcome:
+    """Apply the impact map when ``joint`` reaches its ``side`` limit at time t.
+
+    ``q`` must already lie on the stop. Plastic impact, a rebound slower than ``v_lock`` or
+    a bounce closer than :data:`ZENO_DT` to the previous one locks the joint; a lock whose
+    force is already of the wrong sign releases at once (two events).
+    """
+    model = hs.model
+    k = model.jidx[joint]
+    before = hs.current()
+    _, cd_minus, _ = model.coord_fn(q, v)
+    cdm = float(np.asarray(cd_minus).ravel()[k])
+    e = model.mech.joints[joint].restitution
+    T_minus = 0.5 * np.sum(model.mass * v**2)
+
+    hs.locked[joint] = side
+    p_locked = hs.p
+    row = model.n_fixed + model.locks.index(joint)
+    zeno = last_bounce is not None and t - last_bounce < ZENO_DT
+    v_plus, imp = impact_map(model, q, v, t, p_locked, row, -e * cdm)
+    cdp = -e * cdm
+    bounce = e > 0 and abs(cdp) > v_lock and not zeno
+    if not bounce:
+        v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
+        cdp = 0.0
+    impulses = {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
+                if x != 0.0}
+    lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
+    kind = "bounce" if bounce else ("lock" if abs(cdm) <= v_lock else "limit")
+    if bounce:
+        del hs.locked[joint]
+    after = hs.current()
+    ev = Event(t, kind, joint, side, before, after, cdm, cdp, impulses, lost)
+    out = LimitOutcome(v_plus, ev, not bounce)
+    if not bounce:
+        _, lam, _ = model.kkt(q, v_plus, t, hs.p)
+        if hs.push(lam, joint) < 0.0:
+            out.released_at_once = True
+    return out
+
+
+def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+            force: float) -> Event:
+    """Unlock ``joint`` at time t; the event carries the lock force at release."""
+    before = hs.current()
+    side = hs.locked.pop(joint)
+    after = hs.current()
+    k = hs.model.jidx[joint]
+    _, cd, _ = hs.model.coord_fn(q, v)
+    cdv = float(np.asarray(cd).ravel()[k])
+    return Event(t, "release", joint, side, before, after, cdv, cdv, {}, 0.0, float(force))
+
+
+def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                  side: str) -> bool:
+    """True when, unlocked, the joint would accelerate into its stop at once."""
+    model = hs.model
+    a, _, _ = model.kkt(q, v, t, hs.p)
+    _, _, cdd, _ = model.post_fn(q, v, a, t)
+    acc = float(np.asarray(cdd).ravel()[model.jidx[joint]])
+    return acc < 0.0 if side == "lower" else acc > 0.0

@@ -1,0 +1,273 @@
+"""Reading mechanism TOML files into :class:`~cmm_dae.mechanism.Mechanism`.
+
+Every problem in a file is collected (wrong type, unknown key with a "did you mean",
+missing key, NaN, bad reference, ...) and raised once as a :class:`ModelError` that names
+the file, the table and the key. Nothing in a file is evaluated as Python.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .errors import ModelError, Problem
+from .mechanism import (
+    MOTIONS,
+    Body,
+    Damper,
+    Driver,
+    Initial,
+    Joint,
+    Limits,
+    Mechanism,
+    Spring,
+    validate,
+)
+
+_REQUIRED = object()
+
+TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "initial")
+MECH_KEYS = ("name", "gravity")
+BODY_KEYS = ("mass", "inertia", "inertia_about", "centroid", "points", "guess")
+JOINT_KEYS = ("type", "connects", "axis", "angle", "limits", "restitution", "spring", "damper")
+DRIVER_KEYS = {
+    "constant_speed": ("motion", "initial", "speed"),
+    "polynomial": ("motion", "coefficients"),
+    "harmonic": ("motion", "initial", "amplitude", "frequency", "phase"),
+    "table": ("motion", "times", "values"),
+}
+
+
+class _Reader:
+    """Typed access to a TOML table that records problems instead of raising."""
+
+    def __init__(self) -> None:
+        self.problems: list[Problem] = []
+
+    def bad(self, table: str, key: str, msg: str) -> None:
+        self.problems.append(Problem(table, key, msg))
+
+    def keys(self, table: str, d: Any, allowed: tuple[str, ...]) -> dict:
+        if not isinstance(d, dict):
+            self.bad(table, "", f"expected a table, got {type(d).__name__} {d!r}")
+            return {}
+        for k in d:
+            if k not in allowed:
+                close = difflib.get_close_matches(k, allowed, n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else \
+                    f" (allowed: {', '.join(allowed)})"
+                self.bad(table, k, f"unknown key{hint}")
+        return d
+
+    def num(self, table: str, d: dict, key: str, default: Any = _REQUIRED) -> float:
+        if key not in d:
+            if default is _REQUIRED:
+                self.bad(table, key, "missing (expected a number)")
+                return math.nan
+            return default
+        return self._num(table, key, d[key])
+
+    def _num(self, table: str, key: str, v: Any) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            self.bad(table, key, f"expected a number, got {type(v).__name__} {v!r}")
+            return math.nan
+        if not math.isfinite(v):
+            self.bad(table, key, f"expected a finite number, got {v}")
+            return math.nan
+        return float(v)
+
+    def vec(self, table: str, d: dict, key: str, n: int | None, default: Any = _REQUIRED
+            ) -> tuple[float, ...]:
+        if key not in d:
+            if default is _REQUIRED:
+                self.bad(table, key, f"missing (expected a list of {n or 'some'} numbers)")
+                return tuple([math.nan] * (n or 0))
+            return default
+        v = d[key]
+        if not isinstance(v, list) or (n is not None and len(v) != n):
+            self.bad(table, key, f"expected a list of {n or 'some'} numbers, got {v!r}")
+            return tuple([math.nan] * (n or 0))
+        out = []
+        for i, x in enumerate(v):
+            out.append(self._num(table, f"{key}[{i}]", x))
+        return tuple(out)
+
+    def string(self, table: str, d: dict, key: str, default: Any = _REQUIRED) -> str:
+        if key not in d:
+            if default is _REQUIRED:
+                self.bad(table, key, "missing (expected a string)")
+                return ""
+            return default
+        v = d[key]
+        if not isinstance(v, str):
+            self.bad(table, key, f"expected a string, got {type(v).__name__} {v!r}")
+            return ""
+        return v
+
+    def sub(self, table: str, d: dict, key: str) -> dict:
+        v = d.get(key, {})
+        if not isinstance(v, dict):
+            self.bad(table, key, f"expected a table, got {type(v).__name__} {v!r}")
+            return {}
+        return v
+
+
+def load(path: str | Path) -> Mechanism:
+    """Load a mechanism from a TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The model file.
+
+    Returns
+    -------
+    Mechanism
+
+    Raises
+    ------
+    ModelError
+        Listing every problem of the file, each with its table and key.
+    """
+    path = Path(path)
+    src = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ModelError(Problem("", "", f"cannot read the file: {e.strerror}"), src) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ModelError(Problem("", "", f"TOML syntax error: {e}"), src) from None
+    return from_dict(data, source=src)
+
+
+def from_dict(data: dict, *, source: str | None = None) -> Mechanism:
+    """Build a mechanism from the parsed TOML structure (see :func:`load`)."""
+    r = _Reader()
+    r.keys("", data, TOP_KEYS)
+    mech = r.keys("mechanism", r.sub("", data, "mechanism"), MECH_KEYS)
+    name = r.string("mechanism", mech, "name", default=Path(source).stem if source else "mechanism")
+    gravity = r.vec("mechanism", mech, "gravity", 2, default=(0.0, -9.81))
+
+    ground_t = r.keys("ground", r.sub("", data, "ground"), ("points",))
+    ground = {}
+    for k, v in r.sub("ground", ground_t, "points").items():
+        ground[k] = r.vec("ground.points", {k: v}, k, 2)
+
+    bodies = [_body(r, k, v) for k, v in r.sub("", data, "bodies").items()]
+    joints = [_joint(r, k, v) for k, v in r.sub("", data, "joints").items()]
+    drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
+
+    ini = r.keys("initial", r.sub("", data, "initial"), ("joints", "velocities"))
+    ij = {k: r._num("initial", f"joints.{k}", v)
+          for k, v in r.sub("initial", ini, "joints").items()}
+    iv = {k: r._num("initial", f"velocities.{k}", v)
+          for k, v in r.sub("initial", ini, "velocities").items()}
+
+    problems = list(r.problems)
+    try:
+        # Bad values were replaced by NaN above, so validation would repeat them: build
+        # without validating, then report only what the reader did not already say.
+        m = Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
+                      initial=Initial(ij, iv), gravity=gravity, source=source, check=False)
+        seen = {(p.table, p.key.split("[")[0]) for p in problems}
+        problems += [p for p in validate(m) if (p.table, p.key) not in seen
+                     and (p.table, p.key.split(".")[0]) not in seen]
+    except Exception as e:  # pragma: no cover - defensive: never a deep traceback on bad input
+        problems.append(Problem("", "", f"could not build the mechanism: {e}"))
+    if problems:
+        raise ModelError(problems, source)
+    return m
+
+
+def _body(r: _Reader, name: str, d: Any) -> Body:
+    t = f"bodies.{name}"
+    d = r.keys(t, d, BODY_KEYS)
+    mass = r.num(t, d, "mass")
+    inertia = r.num(t, d, "inertia")
+    centroid = r.vec(t, d, "centroid", 2, default=(0.0, 0.0))
+    pts_t = r.sub(t, d, "points")
+    points = {k: r.vec(f"{t}.points", pts_t, k, 2) for k in pts_t}
+    guess = r.vec(t, d, "guess", 3, default=None)
+    about = r.string(t, d, "inertia_about", default=None)
+    if about is not None:
+        if about not in points:
+            r.bad(t, "inertia_about", f"unknown point '{about}' (points: "
+                  f"{', '.join(points) or 'none'})")
+        else:
+            p = points[about]
+            inertia_c = inertia - mass * ((p[0] - centroid[0]) ** 2 + (p[1] - centroid[1]) ** 2)
+            if math.isfinite(inertia_c) and inertia_c <= 0:
+                r.bad(t, "inertia", f"{inertia} kg m^2 about '{about}' leaves a centroidal "
+                      f"inertia of {inertia_c:.6g} <= 0 (parallel-axis theorem)")
+                inertia_c = math.nan
+            inertia = inertia_c
+    return Body(name, mass, inertia, centroid, points, guess)
+
+
+def _joint(r: _Reader, name: str, d: Any) -> Joint:
+    t = f"joints.{name}"
+    d = r.keys(t, d, JOINT_KEYS)
+    jtype = r.string(t, d, "type")
+    if jtype and jtype not in ("revolute", "prismatic"):
+        r.bad(t, "type", f"expected 'revolute' or 'prismatic', got {jtype!r}")
+    conn = d.get("connects")
+    first = second = "?.?"
+    if conn is None:
+        r.bad(t, "connects", "missing (expected [\"body.point\", \"body.point\"])")
+    elif not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str) for c in conn)):
+        r.bad(t, "connects", f"expected two strings \"body.point\", got {conn!r}")
+    else:
+        first, second = conn
+    if jtype == "revolute":
+        for k in ("axis", "angle"):
+            if k in d:
+                r.bad(t, k, "only a prismatic joint has this key")
+    axis = r.vec(t, d, "axis", 2, default=(1.0, 0.0))
+    angle = r.num(t, d, "angle", default=0.0)
+    limits = None
+    if "limits" in d:
+        lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"), ("lower", "upper"))
+        limits = Limits(r.num(f"{t}.limits", lt, "lower", None),
+                        r.num(f"{t}.limits", lt, "upper", None))
+    restitution = r.num(t, d, "restitution", default=0.0)
+    if "restitution" in d and limits is None:
+        r.bad(t, "restitution", "a restitution needs 'limits' to act on")
+    spring = damper = None
+    if "spring" in d:
+        st = r.keys(f"{t}.spring", r.sub(t, d, "spring"), ("stiffness", "rest"))
+        spring = Spring(r.num(f"{t}.spring", st, "stiffness"),
+                        r.num(f"{t}.spring", st, "rest", 0.0))
+    if "damper" in d:
+        dt = r.keys(f"{t}.damper", r.sub(t, d, "damper"), ("damping",))
+        damper = Damper(r.num(f"{t}.damper", dt, "damping"))
+    return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper)
+
+
+def _driver(r: _Reader, name: str, d: Any) -> Driver:
+    t = f"drivers.{name}"
+    if not isinstance(d, dict):
+        r.bad(t, "", f"expected a table, got {d!r}")
+        return Driver(name)
+    motion = r.string(t, d, "motion")
+    if motion not in MOTIONS:
+        if motion:
+            close = difflib.get_close_matches(motion, MOTIONS, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            r.bad(t, "motion", f"expected one of {', '.join(MOTIONS)}, got {motion!r}{hint}")
+        return Driver(name, "constant_speed")
+    r.keys(t, d, DRIVER_KEYS[motion])
+    if motion == "constant_speed":
+        return Driver(name, motion, initial=r.num(t, d, "initial"), speed=r.num(t, d, "speed"))
+    if motion == "polynomial":
+        return Driver(name, motion, coefficients=r.vec(t, d, "coefficients", None))
+    if motion == "harmonic":
+        return Driver(name, motion, initial=r.num(t, d, "initial"),
+                      amplitude=r.num(t, d, "amplitude"), frequency=r.num(t, d, "frequency"),
+                      phase=r.num(t, d, "phase", 0.0))
+    return Driver(name, motion, times=r.vec(t, d, "times", None),
+                  values=r.vec(t, d, "values", None))

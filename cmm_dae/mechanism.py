@@ -1,0 +1,364 @@
+"""Mechanism description: frozen dataclasses, buildable in Python or loaded from TOML.
+
+SI units throughout: m, kg, s, rad, N, N m. A body's pose is the position and angle
+of its own frame, the frame its ``points`` and ``centroid`` are written in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import InitVar, dataclass, field
+from types import MappingProxyType
+from typing import Literal
+
+from .errors import ModelError, Problem
+
+GROUND = "ground"
+JOINT_TYPES = ("revolute", "prismatic")
+MOTIONS = ("constant_speed", "polynomial", "harmonic", "table")
+
+Vec2 = tuple[float, float]
+
+
+def _frozen(d: dict | None) -> MappingProxyType:
+    return MappingProxyType(dict(d or {}))
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body.
+
+    Parameters
+    ----------
+    name : str
+        Body name (unique, not ``"ground"``).
+    mass : float
+        Mass, kg (> 0).
+    inertia : float
+        Moment of inertia about the centroid, kg m^2 (> 0).
+    centroid : (float, float)
+        Centroid in the body frame, m.
+    points : dict[str, (float, float)]
+        Named points in the body frame, m.
+    guess : (float, float, float) or None
+        Pose guess (x m, y m, theta rad) of the body frame for assembly.
+    """
+
+    name: str
+    mass: float
+    inertia: float
+    centroid: Vec2 = (0.0, 0.0)
+    points: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    guess: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", _frozen(
+            {k: (float(v[0]), float(v[1])) for k, v in dict(self.points).items()}))
+        object.__setattr__(self, "centroid", (float(self.centroid[0]), float(self.centroid[1])))
+
+    @classmethod
+    def with_inertia_about(cls, name: str, mass: float, inertia: float, about: Vec2,
+                           centroid: Vec2, **kw) -> Body:
+        """Build a body whose inertia is given about a point (parallel-axis theorem).
+
+        ``inertia`` is about ``about`` (body frame, m); the stored value is centroidal.
+        """
+        d2 = (about[0] - centroid[0]) ** 2 + (about[1] - centroid[1]) ** 2
+        return cls(name, mass, inertia - mass * d2, centroid, **kw)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Extreme positions of a joint coordinate (rad or m); either side may be None."""
+
+    lower: float | None = None
+    upper: float | None = None
+
+
+@dataclass(frozen=True)
+class Spring:
+    """Linear spring on a joint coordinate: force -stiffness (c - rest).
+
+    stiffness in N m/rad (revolute) or N/m (prismatic); rest in rad or m.
+    """
+
+    stiffness: float
+    rest: float = 0.0
+
+
+@dataclass(frozen=True)
+class Damper:
+    """Linear damper on a joint coordinate rate: N m s/rad or N s/m."""
+
+    damping: float
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A lower pair between two bodies (either may be ``ground``).
+
+    Parameters
+    ----------
+    name : str
+        Joint name.
+    type : {"revolute", "prismatic"}
+        Pair type.
+    first, second : str
+        ``"body.point"`` of the first and the second body.
+    axis : (float, float)
+        Prismatic sliding direction in the first body's frame (normalised on use).
+    angle : float
+        Prismatic: the held relative angle ``theta_second - theta_first``, rad.
+    limits : Limits or None
+        Extreme positions of the joint coordinate (geometric constraint).
+    restitution : float
+        Newton coefficient at the limits, 0 (plastic) to 1.
+    spring : Spring or None
+        Spring on the joint coordinate (a rest beyond a limit is a preload: force constraint).
+    damper : Damper or None
+        Damper on the joint coordinate rate.
+    """
+
+    name: str
+    type: Literal["revolute", "prismatic"]
+    first: str
+    second: str
+    axis: Vec2 = (1.0, 0.0)
+    angle: float = 0.0
+    limits: Limits | None = None
+    restitution: float = 0.0
+    spring: Spring | None = None
+    damper: Damper | None = None
+
+    @property
+    def first_body(self) -> str:
+        return self.first.split(".", 1)[0]
+
+    @property
+    def second_body(self) -> str:
+        return self.second.split(".", 1)[0]
+
+    @property
+    def unit(self) -> str:
+        return "rad" if self.type == "revolute" else "m"
+
+
+@dataclass(frozen=True)
+class Driver:
+    """Prescribed motion of a joint coordinate (one driver per driven joint).
+
+    motion : {"constant_speed", "polynomial", "harmonic", "table"}
+        ``constant_speed``: ``initial + speed t``; ``polynomial``: ``sum c_k t^k``;
+        ``harmonic``: ``initial + amplitude sin(2 pi frequency t + phase)``;
+        ``table``: C2 cubic spline through ``times``/``values`` with zero end slopes.
+    Units: rad, rad/s, Hz, s (m, m/s for a prismatic joint).
+    """
+
+    joint: str
+    motion: str = "constant_speed"
+    initial: float = 0.0
+    speed: float = 0.0
+    coefficients: tuple[float, ...] = ()
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+
+    def value0(self) -> float:
+        """Coordinate at t = 0."""
+        if self.motion == "constant_speed":
+            return self.initial
+        if self.motion == "polynomial":
+            return self.coefficients[0] if self.coefficients else 0.0
+        if self.motion == "harmonic":
+            return self.initial + self.amplitude * math.sin(self.phase)
+        return self.values[0]
+
+
+@dataclass(frozen=True)
+class Initial:
+    """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s)."""
+
+    joints: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    velocities: MappingProxyType = field(default_factory=lambda: _frozen({}))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joints", _frozen(self.joints))
+        object.__setattr__(self, "velocities", _frozen(self.velocities))
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A planar mechanism: ground points, bodies, joints, drivers, initial state.
+
+    Built from lists or dicts; validated on construction (every problem at once,
+    one :class:`ModelError`) unless ``check=False``.
+    """
+
+    name: str
+    bodies: MappingProxyType
+    joints: MappingProxyType
+    ground: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    drivers: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    initial: Initial = field(default_factory=Initial)
+    gravity: Vec2 = (0.0, -9.81)
+    source: str | None = None
+    check: InitVar[bool] = True
+
+    def __post_init__(self, check: bool) -> None:
+        def as_map(items, key):
+            if isinstance(items, dict | MappingProxyType):
+                return _frozen(items)
+            return _frozen({getattr(x, key): x for x in items})
+
+        object.__setattr__(self, "bodies", as_map(self.bodies, "name"))
+        object.__setattr__(self, "joints", as_map(self.joints, "name"))
+        object.__setattr__(self, "drivers", as_map(self.drivers, "joint"))
+        object.__setattr__(self, "ground", _frozen(
+            {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
+        object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
+        problems = validate(self) if check else []
+        if problems:
+            raise ModelError(problems, self.source)
+
+    @property
+    def limited_joints(self) -> list[str]:
+        """Names of the joints with limits (the metamorphic joints), in file order."""
+        return [n for n, j in self.joints.items() if j.limits is not None]
+
+    def point(self, ref: str) -> Vec2:
+        """Local coordinates (m) of ``"body.point"`` in its body frame."""
+        body, pt = ref.split(".", 1)
+        if body == GROUND:
+            return self.ground[pt]
+        return self.bodies[body].points[pt]
+
+
+def _finite(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _check_ref(m: Mechanism, table: str, key: str, ref: str, out: list[Problem]) -> None:
+    if not isinstance(ref, str) or "." not in ref:
+        out.append(Problem(table, key, f"expected 'body.point', got {ref!r}"))
+        return
+    body, pt = ref.split(".", 1)
+    if body == GROUND:
+        if pt not in m.ground:
+            out.append(Problem(table, key, f"unknown ground point '{pt}' in {ref!r} "
+                               f"(ground points: {', '.join(m.ground) or 'none'})"))
+    elif body not in m.bodies:
+        out.append(Problem(table, key, f"unknown body '{body}' in {ref!r} "
+                           f"(bodies: {', '.join(m.bodies) or 'none'})"))
+    elif pt not in m.bodies[body].points:
+        out.append(Problem(table, key, f"body '{body}' has no point '{pt}' "
+                           f"(its points: {', '.join(m.bodies[body].points) or 'none'})"))
+
+
+def validate(m: Mechanism) -> list[Problem]:
+    """All semantic problems of a mechanism (empty list when it is sound)."""
+    out: list[Problem] = []
+    if not all(_finite(g) for g in m.gravity):
+        out.append(Problem("mechanism", "gravity", f"expected two finite numbers, got {m.gravity}"))
+    if not m.bodies:
+        out.append(Problem("bodies", "", "a mechanism needs at least one body"))
+    for name, b in m.bodies.items():
+        t = f"bodies.{name}"
+        if name == GROUND:
+            out.append(Problem(t, "", "'ground' is reserved for the frame"))
+        if not (_finite(b.mass) and b.mass > 0):
+            out.append(Problem(t, "mass", f"expected a positive mass in kg, got {b.mass}"))
+        if not (_finite(b.inertia) and b.inertia > 0):
+            out.append(Problem(t, "inertia", "expected a positive centroidal inertia in kg m^2, "
+                               f"got {b.inertia:.6g}" if _finite(b.inertia) else
+                               f"expected a positive centroidal inertia, got {b.inertia}"))
+    used_bodies: set[str] = set()
+    for name, j in m.joints.items():
+        t = f"joints.{name}"
+        if j.type not in JOINT_TYPES:
+            out.append(Problem(t, "type", f"expected one of {', '.join(JOINT_TYPES)}, "
+                               f"got {j.type!r}"))
+        _check_ref(m, t, "connects", j.first, out)
+        _check_ref(m, t, "connects", j.second, out)
+        if j.first_body == j.second_body:
+            out.append(Problem(t, "connects", f"joins body '{j.first_body}' to itself"))
+        used_bodies.update((j.first_body, j.second_body))
+        if j.type == "prismatic" and not (all(_finite(a) for a in j.axis)
+                                          and math.hypot(*j.axis) > 1e-12):
+                out.append(Problem(t, "axis", f"expected a non-zero direction, got {j.axis}"))
+        if j.limits is not None:
+            lo, up = j.limits.lower, j.limits.upper
+            if lo is None and up is None:
+                out.append(Problem(t, "limits", "give 'lower', 'upper' or both"))
+            if lo is not None and up is not None and not lo < up:
+                out.append(Problem(t, "limits", f"lower ({lo}) must be below upper ({up})"))
+        if not (_finite(j.restitution) and 0.0 <= j.restitution <= 1.0):
+            out.append(Problem(t, "restitution", f"expected a number in [0, 1], "
+                               f"got {j.restitution}"))
+        if j.spring is not None and not (_finite(j.spring.stiffness) and j.spring.stiffness >= 0):
+            out.append(Problem(t, "spring.stiffness", "expected a stiffness >= 0, "
+                               f"got {j.spring.stiffness}"))
+        if j.damper is not None and not (_finite(j.damper.damping) and j.damper.damping >= 0):
+            out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
+                               f"got {j.damper.damping}"))
+    for name in m.bodies:
+        if name not in used_bodies:
+            out.append(Problem(f"bodies.{name}", "", "is connected by no joint"))
+    for name, d in m.drivers.items():
+        t = f"drivers.{name}"
+        if name not in m.joints:
+            out.append(Problem(t, "", f"drives unknown joint '{name}' "
+                               f"(joints: {', '.join(m.joints) or 'none'})"))
+        elif m.joints[name].limits is not None:
+            out.append(Problem(t, "", f"joint '{name}' has limits: a driven joint cannot be "
+                               "metamorphic"))
+        out.extend(_check_driver(t, d))
+    _check_initial(m, out)
+    return out
+
+
+def _check_driver(t: str, d: Driver) -> list[Problem]:
+    out: list[Problem] = []
+    if d.motion not in MOTIONS:
+        out.append(Problem(t, "motion", f"expected one of {', '.join(MOTIONS)}, got {d.motion!r}"))
+    elif d.motion == "polynomial" and not d.coefficients:
+        out.append(Problem(t, "coefficients", "expected at least one coefficient"))
+    elif d.motion == "table":
+        if len(d.times) < 2 or len(d.times) != len(d.values):
+            out.append(Problem(t, "times", "expected 'times' and 'values' of equal length >= 2, "
+                               f"got {len(d.times)} and {len(d.values)}"))
+        elif any(b <= a for a, b in zip(d.times, d.times[1:], strict=False)):
+            out.append(Problem(t, "times", "expected strictly increasing times"))
+        elif d.times[0] != 0.0:
+            out.append(Problem(t, "times",
+                               f"the table must start at t = 0, starts at {d.times[0]}"))
+    elif d.motion == "harmonic" and not d.frequency >= 0:
+        out.append(Problem(t, "frequency", f"expected a frequency >= 0 Hz, got {d.frequency}"))
+    return out
+
+
+def _check_initial(m: Mechanism, out: list[Problem]) -> None:
+    for key, table in (("joints", m.initial.joints), ("velocities", m.initial.velocities)):
+        for jn, val in table.items():
+            if jn not in m.joints:
+                out.append(Problem("initial", f"{key}.{jn}", f"unknown joint '{jn}' "
+                                   f"(joints: {', '.join(m.joints) or 'none'})"))
+            elif not _finite(val):
+                out.append(Problem("initial", f"{key}.{jn}",
+                                   f"expected a finite number, got {val}"))
+            elif key == "joints" and jn in m.drivers:
+                v0 = m.drivers[jn].value0()
+                if abs(val - v0) > 1e-12 * max(1.0, abs(v0)):
+                    out.append(Problem("initial", f"joints.{jn}", f"joint '{jn}' is driven: its "
+                                       f"driver gives {v0!r} at t = 0, the file says {val!r}"))
+            elif key == "velocities" and jn in m.drivers:
+                out.append(Problem("initial", f"velocities.{jn}", f"joint '{jn}' is driven: its "
+                                   "velocity comes from its driver"))
+            elif key == "joints" and m.joints[jn].limits is not None:
+                lim = m.joints[jn].limits
+                tol = 1e-12
+                if (lim.lower is not None and val < lim.lower - tol) or (
+                        lim.upper is not None and val > lim.upper + tol):
+                    out.append(Problem("initial", f"joints.{jn}", f"{val} lies outside the "
+                                       f"limits [{lim.lower}, {lim.upper}] of joint '{jn}'"))

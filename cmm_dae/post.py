@@ -1,0 +1,113 @@
+"""From states (t, q, v) to a Result: KKT solves for accelerations, efforts and forces.
+
+Efforts and constraint forces always come from a KKT solve at (q, v, t), batched over all
+samples (one mapped CasADi call and one batched ``numpy.linalg.solve``); never from an
+integrator's loosely toleranced multipliers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .equations import Model
+from .mechanism import GROUND
+from .result import Configuration, Event, Result, Stats
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Accelerations (n, nq), multipliers (n, m) and Phi_q (n, m, nq) at every sample.
+
+    ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
+    """
+    n, nq, m = t.size, model.nq, model.m
+    f = model.kkt_fn.map(n)
+    Phi_q, Qf, gamma = f(q.T, v.T, t[None, :], P.T)
+    Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
+    Qf = np.asarray(Qf).T
+    gamma = np.asarray(gamma).T
+    free = np.asarray(model.free_fn.map(n)(P.T)).T
+    A = np.zeros((n, nq + m, nq + m))
+    A[:, range(nq), range(nq)] = model.mass
+    A[:, :nq, nq:] = Phi_q.transpose(0, 2, 1)
+    A[:, nq:, :nq] = Phi_q
+    A[:, range(nq, nq + m), range(nq, nq + m)] = free
+    rhs = np.concatenate([Qf, gamma], axis=1)
+    sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+    return sol[:, :nq], sol[:, nq:], Phi_q
+
+
+def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+                 config: np.ndarray, configurations: list[Configuration],
+                 params: list[np.ndarray], events: list[Event], stats: Stats,
+                 status: str = "success") -> Result:
+    """Post-process sampled states into a :class:`Result`.
+
+    Parameters
+    ----------
+    t : (n,) s; q, v : (n, nq) centroid coordinates and rates; config : (n,) indices into
+    ``configurations``; params : the parameter vector of each configuration.
+    """
+    mech = model.mech
+    n = t.size
+    P = np.array([params[c] for c in config]).reshape(n, -1)
+    if n:
+        a, lam, Phi_q = batch_kkt(model, t, q, v, P)
+        c, cd, cdd, pts = (np.asarray(x) for x in model.post_fn.map(n)(q.T, v.T, a.T, t[None, :]))
+        phi_m = model.phi_fn.map(n)(q.T, t[None, :], P.T)
+        phi = np.asarray(phi_m[0]).T
+        hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).T
+    else:
+        nj = len(model.joint_names)
+        a = np.zeros((0, model.nq))
+        lam = np.zeros((0, model.m))
+        Phi_q = np.zeros((0, model.m, model.nq))
+        c = cd = cdd = np.zeros((nj, 0))
+        pts = np.zeros((2, 0))
+        phi = hvel = np.zeros((0, model.m))
+    free = np.array([np.asarray(model.free_fn(p)).ravel() for p in params])
+    active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
+    drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
+    drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
+
+    nj = len(model.joint_names)
+    pts = pts.reshape(2, n, nj).transpose(1, 2, 0) if n else np.zeros((0, nj, 2))
+    jforce = np.zeros((n, nj, 2))
+    jtorque = np.zeros((n, nj))
+    for k, (name, j) in enumerate(mech.joints.items()):
+        rows = model.rows_of("joint", name) + model.rows_of("lock", name)
+        G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
+        ref = pts[:, k, :]
+        if j.second_body != GROUND:
+            b = model.bidx[j.second_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = F
+            jtorque[:, k] = Mc - _cross(ref - q[:, 3 * b:3 * b + 2], F)
+        else:  # action = -reaction on the first body
+            b = model.bidx[j.first_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = -F
+            jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
+    effort = np.zeros((n, len(model.driver_names)))
+    for k, name in enumerate(model.driver_names):
+        effort[:, k] = -lam[:, model.rows_of("driver", name)[0]]
+
+    data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
+            "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
+            "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel}
+    meta = {
+        "mechanism": mech.name,
+        "source": mech.source,
+        "bodies": model.body_names,
+        "centroids": [list(b.centroid) for b in mech.bodies.values()],
+        "masses": model.mass.tolist(),
+        "joints": model.joint_names,
+        "joint_types": [j.type for j in mech.joints.values()],
+        "drivers": model.driver_names,
+        "rows": [f"{r.kind} {r.name}" for r in model.rows],
+    }
+    return Result(meta, data, configurations, events, stats, status)

@@ -1,0 +1,287 @@
+"""Results of a run: time series, configurations, events, statistics; CSV and file export.
+
+A :class:`Result` knows nothing of the solver that made it: IDA and the paper's iterative
+algorithm fill the same object, so every report, plot and check works for both.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import CmmError
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """A configuration: the set of locked metamorphic joints.
+
+    Attributes
+    ----------
+    locked : tuple[str, ...]
+        Locked joints (sorted).
+    sides : tuple[str, ...]
+        ``"lower"``/``"upper"`` for each locked joint.
+    dof : int
+        Degrees of freedom of the mechanism with its drivers removed (mobility).
+    label : str
+        The paper's name: non-collision, internal/external collision (joint ...).
+    """
+
+    locked: tuple[str, ...]
+    sides: tuple[str, ...]
+    dof: int
+    label: str
+
+
+@dataclass(frozen=True)
+class Event:
+    """One configuration change (or bounce), in time order.
+
+    Attributes
+    ----------
+    t : float
+        Time, s.
+    kind : str
+        ``"limit"`` (reached a limit and locked), ``"bounce"`` (reached it and rebounded),
+        ``"lock"`` (locked without impact), ``"release"``.
+    joint : str
+        The metamorphic joint.
+    side : str
+        ``"lower"`` or ``"upper"``.
+    before, after : int
+        Configuration indices (into ``Result.configurations``).
+    velocity_before, velocity_after : float
+        Joint coordinate rate just before and after, rad/s or m/s.
+    impulses : dict[str, float]
+        Impulse carried by each constraint row label, N s (or N m s).
+    energy_lost : float
+        Kinetic energy lost in the impact, J.
+    release_force : float
+        Lock force/torque at a release (the value whose sign change released it), N or N m.
+    """
+
+    t: float
+    kind: str
+    joint: str
+    side: str
+    before: int
+    after: int
+    velocity_before: float = 0.0
+    velocity_after: float = 0.0
+    impulses: dict[str, float] = field(default_factory=dict)
+    energy_lost: float = 0.0
+    release_force: float = 0.0
+
+
+@dataclass
+class Stats:
+    """Solver statistics of a run.
+
+    steps: successful integration steps; nfev/njev: residual and Jacobian evaluations;
+    segments: integrator (re)starts; wall_time and build_time in s.
+    """
+
+    steps: int = 0
+    nfev: int = 0
+    njev: int = 0
+    segments: int = 0
+    wall_time: float = 0.0
+    build_time: float = 0.0
+    method: str = ""
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    """Time series of one joint (``n`` samples).
+
+    position (n,) rad or m; velocity (n,); acceleration (n,); force (n, 2) N, of the first
+    body on the second, global axes; torque (n,) N m, moment of the first body on the second
+    about the second body's connect point (CCW +), lock torque/force included, drivers,
+    springs and dampers excluded.
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+
+
+@dataclass(frozen=True)
+class DriverSeries:
+    """Effort (n,) N m or N the driver applies to the second body in the + joint direction."""
+
+    effort: np.ndarray
+
+
+@dataclass(frozen=True)
+class BodySeries:
+    """Pose (n, 3) x m, y m, theta rad of the body frame; velocity and acceleration alike."""
+
+    pose: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+
+class Result:
+    """Output of :func:`cmm_dae.run_dae` or :func:`cmm_dae.run_iterative`.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Output times, s (event times are always included, twice: before and after).
+    configuration : ndarray, shape (n,)
+        Index into ``configurations`` at each sample.
+    configurations : list[Configuration]
+    events : list[Event]
+    stats : Stats
+    status : str
+        ``"success"`` or a message saying why the run stopped early.
+    """
+
+    def __init__(self, meta: dict[str, Any], data: dict[str, np.ndarray],
+                 configurations: list[Configuration], events: list[Event], stats: Stats,
+                 status: str = "success"):
+        self.meta = meta
+        self.data = data
+        self.configurations = configurations
+        self.events = events
+        self.stats = stats
+        self.status = status
+
+    # ---------------------------------------------------------------- accessors
+    @property
+    def t(self) -> np.ndarray:
+        return self.data["t"]
+
+    @property
+    def configuration(self) -> np.ndarray:
+        return self.data["config"]
+
+    @property
+    def success(self) -> bool:
+        return self.status == "success"
+
+    def _index(self, kind: str, name: str) -> int:
+        names = self.meta[kind]
+        if name not in names:
+            raise CmmError(f"no {kind[:-1]} named {name!r} (known: {', '.join(names)})")
+        return names.index(name)
+
+    def joint(self, name: str) -> JointSeries:
+        """Time series of joint ``name``."""
+        k = self._index("joints", name)
+        d = self.data
+        return JointSeries(d["c"][:, k], d["cd"][:, k], d["cdd"][:, k], d["jforce"][:, k, :],
+                           d["jtorque"][:, k])
+
+    def driver(self, name: str) -> DriverSeries:
+        """Time series of the driver of joint ``name``."""
+        return DriverSeries(self.data["effort"][:, self._index("drivers", name)])
+
+    def body(self, name: str) -> BodySeries:
+        """Time series of body ``name`` (its frame, not its centroid)."""
+        i = self._index("bodies", name)
+        cx, cy = self.meta["centroids"][i]
+        q, v, a = (self.data[k][:, 3 * i:3 * i + 3] for k in ("q", "v", "a"))
+        th, om, al = q[:, 2], v[:, 2], a[:, 2]
+        c, s = np.cos(th), np.sin(th)
+        dx, dy = -(c * cx - s * cy), -(s * cx + c * cy)  # frame origin minus centroid
+        pose = np.column_stack([q[:, 0] + dx, q[:, 1] + dy, th])
+        vel = np.column_stack([v[:, 0] - om * dy, v[:, 1] + om * dx, om])
+        acc = np.column_stack([a[:, 0] - al * dy - om**2 * dx, a[:, 1] + al * dx - om**2 * dy, al])
+        return BodySeries(pose, vel, acc)
+
+    @property
+    def drift(self) -> tuple[float, float]:
+        """Largest constraint residual over the run: (|Phi| in m or rad, |Phi'| in m/s or rad/s)."""
+        return float(np.max(self.data["drift_pos"], initial=0.0)), \
+            float(np.max(self.data["drift_vel"], initial=0.0))
+
+    def __repr__(self) -> str:
+        return (f"Result({self.meta['mechanism']!r}, method={self.stats.method!r}, "
+                f"n={self.t.size}, t=[{self.t[0]:g}, {self.t[-1]:g}] s, "
+                f"events={len(self.events)}, status={self.status!r})")
+
+    # ------------------------------------------------------------------ tables
+    def event_table(self) -> str:
+        """The event log as printable text."""
+        head = (f"{'t [s]':>12}  {'kind':<8} {'joint':<8} {'side':<6} "
+                f"{'configuration before -> after':<58} {'v- -> v+':>22} {'impulse':>10} "
+                f"{'E lost [J]':>11}")
+        lines = [head, "-" * len(head)]
+        for e in self.events:
+            cb = self.configurations[e.before].label
+            ca = self.configurations[e.after].label
+            imp = e.impulses.get(f"lock {e.joint}", 0.0)
+            lines.append(f"{e.t:12.9f}  {e.kind:<8} {e.joint:<8} {e.side:<6} "
+                         f"{cb + ' -> ' + ca:<58} {e.velocity_before:>10.4g} -> "
+                         f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
+        if not self.events:
+            lines.append("(no events)")
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------ export
+    def columns(self) -> dict[str, np.ndarray]:
+        """Every series as named columns (SI units in the names)."""
+        cols: dict[str, np.ndarray] = {"t [s]": self.t, "configuration": self.configuration}
+        for name, typ in zip(self.meta["joints"], self.meta["joint_types"], strict=True):
+            u = "rad" if typ == "revolute" else "m"
+            js = self.joint(name)
+            cols[f"joint {name} position [{u}]"] = js.position
+            cols[f"joint {name} velocity [{u}/s]"] = js.velocity
+            cols[f"joint {name} acceleration [{u}/s^2]"] = js.acceleration
+            cols[f"joint {name} force x [N]"] = js.force[:, 0]
+            cols[f"joint {name} force y [N]"] = js.force[:, 1]
+            cols[f"joint {name} torque [N m]"] = js.torque
+        for name in self.meta["drivers"]:
+            u = "N m" if self.meta["joint_types"][self.meta["joints"].index(name)] == "revolute" \
+                else "N"
+            cols[f"driver {name} effort [{u}]"] = self.driver(name).effort
+        for name in self.meta["bodies"]:
+            b = self.body(name)
+            for k, lab in enumerate(("x [m]", "y [m]", "theta [rad]")):
+                cols[f"body {name} {lab}"] = b.pose[:, k]
+        return cols
+
+    def to_csv(self, path: str | Path) -> Path:
+        """Write every series to a CSV file (one row per sample)."""
+        path = Path(path)
+        cols = self.columns()
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(list(cols))
+            for row in zip(*cols.values(), strict=True):
+                w.writerow([repr(float(x)) for x in row])
+        return path
+
+    def save(self, path: str | Path) -> Path:
+        """Save the whole Result (arrays, configurations, events, stats) to an ``.npz`` file."""
+        path = Path(path)
+        meta = dict(self.meta)
+        meta["configurations"] = [asdict(c) for c in self.configurations]
+        meta["events"] = [asdict(e) for e in self.events]
+        meta["stats"] = asdict(self.stats)
+        meta["status"] = self.status
+        with path.open("wb") as f:
+            np.savez_compressed(f, __meta__=np.array(json.dumps(meta)), **self.data)
+        return path
+
+
+def load_result(path: str | Path) -> Result:
+    """Read a Result written by :meth:`Result.save`."""
+    with np.load(Path(path), allow_pickle=False) as z:
+        meta = json.loads(str(z["__meta__"]))
+        data = {k: z[k] for k in z.files if k != "__meta__"}
+    configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), c["dof"], c["label"])
+               for c in meta.pop("configurations")]
+    events = [Event(**e) for e in meta.pop("events")]
+    stats = Stats(**meta.pop("stats"))
+    status = meta.pop("status")
+    return Result(meta, data, configs, events, stats, status)
