@@ -13,12 +13,12 @@ from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError
 from .loader import from_dict, load
 from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
 from .result import Configuration, Event, Result, Stats, load_result
-from .structure import labeller
+from .structure import Group, Structure, labeller, structure
 
 __all__ = [
     "AssemblyError", "Body", "CmmError", "Configuration", "Damper", "Driver", "Event",
     "Initial", "Joint", "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result",
-    "SolverError", "Spring", "Stats", "from_dict", "labeller", "load", "load_result",
-    "run_dae",
+    "SolverError", "Spring", "Stats", "Group", "Structure", "from_dict", "labeller", "load",
+    "load_result", "run_dae", "structure",
 ]
 __version__ = "0.1.0"

@@ -1,20 +1,297 @@
-"""Structure analysis: mobility, active parts, Assur groups, configuration labels."""
+"""Structure analysis: mobility, active parts, Assur groups and augmented Assur groups.
+
+The mechanism is split the way the paper builds it (section 2): the frame, the active parts
+(bodies driven directly from an already known body), then, one after the other, the
+smallest sets of remaining bodies that are 0-DOF once their joints to the known bodies are
+in place (Assur groups) or 1-DOF with a metamorphic joint whose lock makes them 0-DOF
+(augmented Assur groups). A metamorphic joint is internal when both its bodies belong to the
+group, external when one of them is a known body; locking it gives the *internal* or
+*external collision configuration* of the paper. A joint held on its stop by a preloaded
+spring (force constraint) is not a collision: the paper counts that configuration as
+non-collision.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import combinations
 
-from .mechanism import Mechanism
+from .mechanism import GROUND, Mechanism
+
+
+@dataclass(frozen=True)
+class Group:
+    """One Assur group (or augmented Assur group).
+
+    Attributes
+    ----------
+    name : str
+        Joint letters (R, P) external-internal-external along the group; branches of a
+        class III group are separated by '-'.
+    cls : int
+        Assur class (2, 3, ...); for an augmented group, the class once a metamorphic joint
+        locks.
+    bodies : tuple[str, ...]
+    internal, external : tuple[str, ...]
+        Joint names inside the group / joining it to known bodies.
+    augmented : bool
+        1-DOF group that is 0-DOF only with one of its metamorphic joints locked.
+    metamorphic : tuple[str, ...]
+        Joints of the group with limits.
+    """
+
+    name: str
+    cls: int
+    bodies: tuple[str, ...]
+    internal: tuple[str, ...]
+    external: tuple[str, ...]
+    augmented: bool = False
+    metamorphic: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Structure:
+    """Structure of a mechanism: ``mobility`` (Grübler, drivers removed), ``active``
+    (driven bodies) and ``groups`` in the order they attach; ``unresolved`` lists bodies
+    no group could take (a mechanism that is not built from Assur groups)."""
+
+    mechanism: str
+    mobility: int
+    active: tuple[str, ...]
+    groups: tuple[Group, ...]
+    unresolved: tuple[str, ...] = field(default=())
+    force_constraints: tuple[str, ...] = ()
+
+    def group_of(self, joint: str) -> Group | None:
+        for g in self.groups:
+            if joint in g.internal or joint in g.external:
+                return g
+        return None
+
+    def __str__(self) -> str:
+        lines = [f"Structure of '{self.mechanism}'",
+                 f"  mobility (Grübler, drivers removed): {self.mobility}",
+                 f"  active parts: {', '.join(self.active) or 'none'}"]
+        for i, g in enumerate(self.groups, 1):
+            kind = "augmented Assur group" if g.augmented else "Assur group"
+            lines.append(f"  {i}. {kind} {g.name} (class {'I' * g.cls if g.cls <= 3 else g.cls})"
+                         f": bodies {', '.join(g.bodies)}")
+            lines.append(f"     internal joints: {', '.join(g.internal) or '-'}; "
+                         f"external joints: {', '.join(g.external) or '-'}")
+            if g.metamorphic:
+                parts = []
+                for j in g.metamorphic:
+                    where = "internal" if j in g.internal else "external"
+                    how = "force constraint" if j in self.force_constraints else \
+                        "geometric constraint"
+                    parts.append(f"{j} ({where}, {how})")
+                lines.append(f"     metamorphic joints: {', '.join(parts)}")
+        if self.unresolved:
+            lines.append(f"  not resolved into groups: {', '.join(self.unresolved)}")
+        return "\n".join(lines)
+
+
+def force_constraint_joints(mech: Mechanism) -> dict[str, str]:
+    """Joints whose spring rest lies beyond a limit: joint -> the side it is pressed onto."""
+    out = {}
+    for name, j in mech.joints.items():
+        if j.limits is None or j.spring is None:
+            continue
+        if j.limits.lower is not None and j.spring.rest < j.limits.lower:
+            out[name] = "lower"
+        elif j.limits.upper is not None and j.spring.rest > j.limits.upper:
+            out[name] = "upper"
+    return out
+
+
+def _letter(mech: Mechanism, j: str) -> str:
+    return "R" if mech.joints[j].type == "revolute" else "P"
+
+
+def _group_name(mech: Mechanism, bodies: set[str], internal: list[str], external: list[str]
+                ) -> str:
+    """Letters along the group: a chain from one external joint to the other, or branches
+    (external then internal joint) around a ternary body."""
+    adj: dict[str, list[str]] = {b: [] for b in bodies}
+    for j in internal:
+        adj[mech.joints[j].first_body].append(j)
+        adj[mech.joints[j].second_body].append(j)
+    degree = {b: len(adj[b]) for b in bodies}
+    if max(degree.values(), default=0) <= 2:  # chain
+        ends = [j for j in external]
+        if not ends:
+            return "".join(_letter(mech, j) for j in internal)
+        start = ends[0]
+        b = next(x for x in (mech.joints[start].first_body, mech.joints[start].second_body)
+                 if x in bodies)
+        seq, seen = [start], {start}
+        while True:
+            nxt = [j for j in adj[b] if j not in seen]
+            if not nxt:
+                break
+            j = nxt[0]
+            seq.append(j)
+            seen.add(j)
+            jj = mech.joints[j]
+            b = jj.second_body if jj.first_body == b else jj.first_body
+        rest = [j for j in external if j not in seen]
+        seq += rest[:1]
+        return "".join(_letter(mech, j) for j in seq)
+    hub = max(bodies, key=lambda x: degree[x])
+    branches = []
+    for j in adj[hub]:
+        jj = mech.joints[j]
+        other = jj.second_body if jj.first_body == hub else jj.first_body
+        ext = [e for e in external if other in (mech.joints[e].first_body,
+                                                mech.joints[e].second_body)]
+        branches.append("".join(_letter(mech, e) for e in ext) + _letter(mech, j))
+    hub_ext = [e for e in external if hub in (mech.joints[e].first_body,
+                                              mech.joints[e].second_body)]
+    if hub_ext:
+        branches.append("".join(_letter(mech, e) for e in hub_ext))
+    return "-".join(branches)
+
+
+def _merge(mech: Mechanism, locked: set[str]) -> dict[str, str]:
+    """Body -> representative after welding the locked joints (ground absorbs)."""
+    rep = {b: b for b in mech.bodies}
+    rep[GROUND] = GROUND
+
+    def find(x):
+        while rep[x] != x:
+            x = rep[x]
+        return x
+
+    for j in locked:
+        a, b = find(mech.joints[j].first_body), find(mech.joints[j].second_body)
+        if a != b:
+            if b == GROUND:
+                a, b = b, a
+            rep[b] = a
+    return {b: find(b) for b in rep}
+
+
+def _class(n_bodies: int, degrees: list[int]) -> int:
+    if n_bodies == 2:
+        return 2
+    if n_bodies == 4 and max(degrees, default=0) >= 3:
+        return 3
+    return n_bodies
+
+
+def structure(mech: Mechanism) -> Structure:
+    """Decompose a mechanism into active parts, Assur groups and augmented Assur groups.
+
+    Returns
+    -------
+    Structure
+        Printable (``str``) report.
+    """
+    joints = mech.joints
+    metamorphic = set(mech.limited_joints)
+    mobility = 3 * len(mech.bodies) - 2 * len(joints)
+    known = {GROUND}
+    active = []
+    changed = True
+    while changed:  # bodies driven from a known body are active parts
+        changed = False
+        for d in mech.drivers:
+            j = joints[d]
+            for a, b in ((j.first_body, j.second_body), (j.second_body, j.first_body)):
+                if a in known and b not in known and b != GROUND:
+                    known.add(b)
+                    active.append(b)
+                    changed = True
+    remaining = [b for b in mech.bodies if b not in known]
+    groups: list[Group] = []
+
+    def joints_of(S: set[str]) -> tuple[list[str], list[str]]:
+        internal, external = [], []
+        for n, j in joints.items():
+            if n in mech.drivers:
+                continue
+            a, b = j.first_body, j.second_body
+            if a in S and b in S:
+                internal.append(n)
+            elif (a in S and b in known) or (b in S and a in known):
+                external.append(n)
+        return internal, external
+
+    def connected(S: set[str], internal: list[str]) -> bool:
+        S = set(S)
+        start = next(iter(S))
+        seen, stack = {start}, [start]
+        while stack:
+            x = stack.pop()
+            for n in internal:
+                j = joints[n]
+                for a, b in ((j.first_body, j.second_body), (j.second_body, j.first_body)):
+                    if a == x and b not in seen:
+                        seen.add(b)
+                        stack.append(b)
+        return seen == S
+
+    def try_find(target: int) -> Group | None:
+        for size in range(1, len(remaining) + 1):
+            for combo in combinations(remaining, size):
+                S = set(combo)
+                internal, external = joints_of(S)
+                # every joint of S must go to S or to known bodies
+                if any((j.first_body in S) != (j.second_body in S)
+                       and not ({j.first_body, j.second_body} - S) <= known
+                       for n, j in joints.items() if n not in mech.drivers
+                       and (j.first_body in S or j.second_body in S)):
+                    continue
+                if not connected(S, internal):
+                    continue
+                f = 3 * len(S) - 2 * (len(internal) + len(external))
+                meta = tuple(j for j in internal + external if j in metamorphic)
+                if f != target or (target == 1 and not meta):
+                    continue
+                name = _group_name(mech, S, internal, external)
+                deg = [sum(b in (joints[j].first_body, joints[j].second_body) for j in internal)
+                       for b in S]
+                if target == 1:  # class once one metamorphic joint locks
+                    rep = _merge(mech, {meta[0]})
+                    merged = {rep[b] for b in S} - {GROUND}
+                    cls = _class(len(merged), [d for d in deg])
+                else:
+                    cls = _class(len(S), deg)
+                return Group(name, cls, tuple(sorted(S, key=list(mech.bodies).index)),
+                             tuple(internal), tuple(external), target == 1, meta)
+        return None
+
+    while remaining:
+        g = try_find(0) or try_find(1)
+        if g is None:
+            break
+        groups.append(g)
+        known.update(g.bodies)
+        remaining = [b for b in remaining if b not in known]
+    return Structure(mech.name, mobility, tuple(active), tuple(groups), tuple(remaining),
+                     tuple(force_constraint_joints(mech)))
+
+
+def configuration_label(st: Structure, locked: dict[str, str],
+                        force: dict[str, str]) -> str:
+    """The paper's name of a configuration: non-collision, internal/external collision."""
+    parts = []
+    for j in sorted(locked):
+        if force.get(j) == locked[j]:
+            continue  # held by its preloaded spring: a force constraint, not a collision
+        g = st.group_of(j)
+        where = "internal" if g is not None and j in g.internal else "external"
+        parts.append(f"{where} collision (joint {j})")
+    return ", ".join(parts) if parts else "non-collision"
 
 
 def labeller(mech: Mechanism) -> Callable[[dict[str, str]], tuple[str, int]]:
     """A function giving (label, mobility) of a configuration from its locked joints."""
-    nb, nj = len(mech.bodies), len(mech.joints)
+    st = structure(mech)
+    force = force_constraint_joints(mech)
 
     def label(locked: dict[str, str]) -> tuple[str, int]:
-        dof = 3 * nb - 2 * nj - len(locked)
-        if not locked:
-            return "non-collision", dof
-        return "collision (joint " + ", ".join(sorted(locked)) + ")", dof
+        return configuration_label(st, locked, force), st.mobility - len(locked)
 
     return label

@@ -1,0 +1,154 @@
+"""Independent references for the tests: closed-form kinematics with second-order Taylor
+arithmetic (exact derivatives, no finite differences) and a hand-written Newton-Euler
+free-body solve. Nothing here uses CasADi or the package's equations."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class Jet:
+    """Truncated Taylor number f + f1 e + f2 e^2 / 2 (value, first and second derivative)."""
+
+    __slots__ = ("f", "d1", "d2")
+
+    def __init__(self, f: float, d1: float = 0.0, d2: float = 0.0):
+        self.f, self.d1, self.d2 = float(f), float(d1), float(d2)
+
+    @staticmethod
+    def _c(x) -> Jet:
+        return x if isinstance(x, Jet) else Jet(x)
+
+    def __add__(self, o):
+        o = Jet._c(o)
+        return Jet(self.f + o.f, self.d1 + o.d1, self.d2 + o.d2)
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return Jet(-self.f, -self.d1, -self.d2)
+
+    def __sub__(self, o):
+        return self + (-Jet._c(o))
+
+    def __rsub__(self, o):
+        return Jet._c(o) - self
+
+    def __mul__(self, o):
+        o = Jet._c(o)
+        return Jet(self.f * o.f, self.d1 * o.f + self.f * o.d1,
+                   self.d2 * o.f + 2 * self.d1 * o.d1 + self.f * o.d2)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        return self * Jet._c(o).inv()
+
+    def __rtruediv__(self, o):
+        return Jet._c(o) * self.inv()
+
+    def inv(self):
+        f = 1.0 / self.f
+        return Jet(f, -self.d1 * f * f, (2 * self.d1**2 * f - self.d2) * f * f)
+
+    def chain(self, g0, g1, g2):
+        return Jet(g0, g1 * self.d1, g2 * self.d1**2 + g1 * self.d2)
+
+
+def sin(x):
+    return x.chain(math.sin(x.f), math.cos(x.f), -math.sin(x.f)) if isinstance(x, Jet) \
+        else math.sin(x)
+
+
+def cos(x):
+    return x.chain(math.cos(x.f), -math.sin(x.f), -math.cos(x.f)) if isinstance(x, Jet) \
+        else math.cos(x)
+
+
+def sqrt(x):
+    s = math.sqrt(x.f)
+    return x.chain(s, 0.5 / s, -0.25 / s**3)
+
+
+@dataclass
+class BodyKin:
+    """Centroid position/velocity/acceleration and angle/rate/acceleration at one instant."""
+
+    r: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    th: float
+    om: float
+    al: float
+
+
+def body_kin(x: Jet, y: Jet, c: Jet, s: Jet, theta: float, rate: float, *,
+             th_value: float | None = None) -> BodyKin:
+    """From jets in the crank angle (x, y of the centroid; cos, sin of the body angle) to
+    time derivatives for a crank turning at constant ``rate`` (rad/s)."""
+    om = c.f * s.d1 - s.f * c.d1
+    al = c.f * s.d2 - s.f * c.d2
+    th = th_value if th_value is not None else math.atan2(s.f, c.f)
+    return BodyKin(np.array([x.f, y.f]), rate * np.array([x.d1, y.d1]),
+                   rate**2 * np.array([x.d2, y.d2]), th, rate * om, rate**2 * al)
+
+
+def cross(a, b) -> float:
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def newton_euler(bodies: dict[str, dict], joints: list[dict], drivers: list[dict],
+                 gravity=(0.0, -9.81)) -> dict[str, np.ndarray]:
+    """Solve the free-body equations of all bodies for the joint forces and driver efforts.
+
+    bodies: name -> {m, J, kin: BodyKin}; joints: {name, first, second, point (global,
+    where the force of first on second acts), type} - each revolute joint has 2 unknowns
+    (force of first on second), each prismatic 2 (normal force component along ``normal``
+    and a moment); drivers: {joint, first, second} with one unknown (torque on second).
+    Applied extra generalized forces: bodies[name]['extra'] = (Fx, Fy, Mz about centroid).
+    Returns name -> unknowns.
+    """
+    names = list(bodies)
+    idx = {n: i for i, n in enumerate(names)}
+    cols: list[tuple[str, int]] = []
+    for j in joints:
+        cols += [(j["name"], 0), (j["name"], 1)]
+    for d in drivers:
+        cols.append(("driver " + d["joint"], 0))
+    A = np.zeros((3 * len(names), len(cols)))
+    b = np.zeros(3 * len(names))
+    for n, bd in bodies.items():
+        k = bd["kin"]
+        i = 3 * idx[n]
+        ext = bd.get("extra", (0.0, 0.0, 0.0))
+        b[i:i + 2] = bd["m"] * k.a - bd["m"] * np.array(gravity) - np.array(ext[:2])
+        b[i + 2] = bd["J"] * k.al - ext[2]
+    for col, (jn, comp) in enumerate(cols):
+        if jn.startswith("driver "):
+            d = next(x for x in drivers if x["joint"] == jn[7:])
+            for body, sign in ((d["second"], 1.0), (d["first"], -1.0)):
+                if body in idx:
+                    A[3 * idx[body] + 2, col] += sign
+            continue
+        j = next(x for x in joints if x["name"] == jn)
+        if j["type"] == "revolute":
+            F = np.eye(2)[comp]
+            M = 0.0
+        else:  # prismatic: comp 0 = force along the normal, comp 1 = moment
+            F = np.asarray(j["normal"]) if comp == 0 else np.zeros(2)
+            M = 0.0 if comp == 0 else 1.0
+        for body, sign in ((j["second"], 1.0), (j["first"], -1.0)):
+            if body not in idx:
+                continue
+            i = 3 * idx[body]
+            A[i:i + 2, col] += sign * F
+            A[i + 2, col] += sign * (cross(j["point"] - bodies[body]["kin"].r, F) + M)
+    x = np.linalg.solve(A, b)
+    out: dict[str, np.ndarray] = {}
+    for (jn, _), val in zip(cols, x, strict=True):
+        out.setdefault(jn, [])
+        out[jn].append(val)
+    return {k: np.array(v) for k, v in out.items()}
