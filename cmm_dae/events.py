@@ -191,9 +191,15 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
 
 def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
                   side: str) -> bool:
-    """True when, unlocked, the joint would accelerate into its stop at once."""
+    """True when, unlocked, the joint would clearly accelerate into its stop at once.
+
+    At a release root the lock force and the free acceleration both pass through zero, so
+    only an acceleration into the stop above round-off level (relative to the bodies'
+    accelerations) counts; a single lock can never re-enter (complementarity).
+    """
     model = hs.model
     a, _, _ = model.kkt(q, v, t, hs.p)
     _, _, cdd, _ = model.post_fn(q, v, a, t)
     acc = float(np.asarray(cdd).ravel()[model.jidx[joint]])
-    return acc < 0.0 if side == "lower" else acc > 0.0
+    into = -acc if side == "lower" else acc
+    return into > 1e-9 * (1.0 + float(np.max(np.abs(a))))

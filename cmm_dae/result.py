@@ -217,8 +217,7 @@ class Result:
                 f"{'E lost [J]':>11}")
         lines = [head, "-" * len(head)]
         for e in self.events:
-            cb = self.configurations[e.before].label
-            ca = self.configurations[e.after].label
+            cb, ca = (self._config_text(i) for i in (e.before, e.after))
             imp = e.impulses.get(f"lock {e.joint}", 0.0)
             lines.append(f"{e.t:12.9f}  {e.kind:<8} {e.joint:<8} {e.side:<6} "
                          f"{cb + ' -> ' + ca:<58} {e.velocity_before:>10.4g} -> "
@@ -226,6 +225,10 @@ class Result:
         if not self.events:
             lines.append("(no events)")
         return "\n".join(lines)
+
+    def _config_text(self, i: int) -> str:
+        c = self.configurations[i]
+        return f"{c.label} [{','.join(c.locked)}]" if c.locked else c.label
 
     # ------------------------------------------------------------------ export
     def columns(self) -> dict[str, np.ndarray]:

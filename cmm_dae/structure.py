@@ -75,8 +75,9 @@ class Structure:
                  f"  active parts: {', '.join(self.active) or 'none'}"]
         for i, g in enumerate(self.groups, 1):
             kind = "augmented Assur group" if g.augmented else "Assur group"
-            lines.append(f"  {i}. {kind} {g.name} (class {'I' * g.cls if g.cls <= 3 else g.cls})"
-                         f": bodies {', '.join(g.bodies)}")
+            cls = ("single link, welded to a known body when locked" if g.cls <= 1 else
+                   f"class {'I' * g.cls if g.cls <= 3 else g.cls}")
+            lines.append(f"  {i}. {kind} {g.name} ({cls}): bodies {', '.join(g.bodies)}")
             lines.append(f"     internal joints: {', '.join(g.internal) or '-'}; "
                          f"external joints: {', '.join(g.external) or '-'}")
             if g.metamorphic:
@@ -173,6 +174,8 @@ def _merge(mech: Mechanism, locked: set[str]) -> dict[str, str]:
 
 
 def _class(n_bodies: int, degrees: list[int]) -> int:
+    if n_bodies <= 1:
+        return 1
     if n_bodies == 2:
         return 2
     if n_bodies == 4 and max(degrees, default=0) >= 3:
