@@ -347,6 +347,10 @@ class _Segment:
             stats: Stats):
         model, opts = self.model, self.opts
         nq = model.nq
+        # A state taken from IDA's interpolant at a root satisfies the constraints only to
+        # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
+        q = ev.project_positions(model, q, t0, self.p)
+        v = ev.project_velocities(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
         y0 = np.concatenate([q, v, lam, np.zeros(model.m)])
         yp0 = np.concatenate([v, a, np.zeros(2 * model.m)])

@@ -104,6 +104,17 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> n
     return q
 
 
+def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
+                       ) -> np.ndarray:
+    """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows)."""
+    free = np.asarray(model.free_fn(p)).ravel()
+    act = np.flatnonzero(free == 0.0)
+    _, Phi_q, Phi_t = model.phi_fn(q, t, p)
+    J = np.asarray(Phi_q)[act]
+    r = J @ v + np.asarray(Phi_t).ravel()[act]
+    return v - J.T @ np.linalg.solve(J @ J.T, r)
+
+
 def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
                lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
     """Post-impact velocities and impulses.
