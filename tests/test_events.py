@@ -8,6 +8,7 @@ kinematics (preload release), Carnot's theorem (plastic impact losses).
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -111,7 +112,7 @@ def test_bounce_at_tight_tolerance_is_not_redetected(tmp_path):
         assert ev.velocity_before < 0.0  # every impact approaches the lower stop
     times = np.array([ev.t for ev in res.events])
     assert np.all(np.diff(times) > 0.0)
-    ratios = [b.velocity_before / a.velocity_before for a, b in zip(bounces, bounces[1:])]
+    ratios = [b.velocity_before / a.velocity_before for a, b in pairwise(bounces)]
     assert np.allclose(ratios[:6], 0.5, rtol=1e-7, atol=0.0)
 
 
@@ -215,7 +216,7 @@ def energy_residual(mech, res) -> float:
         P += res.driver(name).effort * res.joint(name).velocity
     # integrate piecewise between event samples (the integrand jumps there)
     cuts = [0] + [k + 1 for k in range(n - 1) if res.t[k + 1] == res.t[k]] + [n]
-    work = sum(simpson(P[a:b], x=res.t[a:b]) for a, b in zip(cuts, cuts[1:]) if b - a > 2)
+    work = sum(simpson(P[a:b], x=res.t[a:b]) for a, b in pairwise(cuts) if b - a >= 2)
     lost = sum(e.energy_lost for e in res.events)
     return work - (T[-1] + V[-1] - T[0] - V[0]) - lost
 
