@@ -279,3 +279,29 @@ def test_structure_classic_mechanisms():
     text = str(cd.structure(cd.load(MODELS / "slider_crank_stop.toml")))
     assert "augmented Assur group RRRP (class II)" in text
     assert "E (external, geometric constraint)" in text
+
+
+def test_lock_of_wrong_sign_releases_at_once():
+    mech = cd.load(TMODELS / "spring_block_stop.toml")
+    res = cd.run_dae(mech, 2.0, rtol=1e-10, atol=1e-12, output_dt=0.001)
+    w = math.sqrt(50.0 / 0.5)
+    t1 = math.asin(0.1 * w / 1.2) / w  # x = (v0 / w) sin(w t) reaches 0.1
+    assert [(e.kind, e.joint, e.side) for e in res.events] == [
+        ("limit", "X", "upper"), ("release", "X", "upper")]
+    assert abs(res.events[0].t - t1) <= 1e-9 and res.events[1].t == res.events[0].t
+    assert res.events[1].release_force < 0.0  # the stop would have had to pull
+    # afterwards: x = 0.1 cos(w (t - t1)), touching the stop again at zero speed, no event
+    after = res.t > t1
+    ref = 0.1 * np.cos(w * (res.t[after] - t1))
+    assert np.max(np.abs(res.joint("X").position[after] - ref)) <= 1e-8
+    assert res.t[-1] == 2.0
+
+
+def test_internal_and_external_collision_labels():
+    from cmm_dae.structure import configuration_label
+
+    st = cd.structure(cd.load(MODELS / "slider_crank_stop.toml"))
+    assert configuration_label(st, {}, {}) == "non-collision"
+    assert configuration_label(st, {"D": "lower"}, {}) == "internal collision (joint D)"
+    assert configuration_label(st, {"E": "upper"}, {}) == "external collision (joint E)"
+    assert configuration_label(st, {"E": "upper"}, {"E": "upper"}) == "non-collision"
