@@ -10,6 +10,7 @@ Public API::
 from .dae import run_dae
 from .equations import Model
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError
+from .iterative import run_iterative
 from .loader import from_dict, load
 from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
 from .result import Configuration, Event, Result, Stats, load_result
@@ -19,6 +20,6 @@ __all__ = [
     "AssemblyError", "Body", "CmmError", "Configuration", "Damper", "Driver", "Event",
     "Initial", "Joint", "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result",
     "SolverError", "Spring", "Stats", "Group", "Structure", "from_dict", "labeller", "load",
-    "load_result", "run_dae", "structure",
+    "load_result", "run_dae", "run_iterative", "structure",
 ]
 __version__ = "0.1.0"

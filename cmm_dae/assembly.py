@@ -32,7 +32,7 @@ def initial_guess(model: Model) -> np.ndarray:
 
 
 def _active_rows(model: Model, p: np.ndarray) -> np.ndarray:
-    free = np.asarray(model.free_fn(p)).ravel()
+    free = model.free(p)[0]
     return np.flatnonzero(free == 0.0)
 
 
@@ -73,8 +73,8 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
             + (f" ({', '.join(names)})" if names else "")), model.mech.source)
 
     def fun(q):
-        phi, Phi_q, _ = model.phi_fn(q, t, p)
-        c, _, c_q = model.coord_fn(q, np.zeros(model.nq))
+        phi, Phi_q, _ = model.phi(q, t, p)
+        c, _, c_q = model.coord(q, np.zeros(model.nq))
         r = np.concatenate([np.asarray(phi).ravel()[act], np.asarray(c).ravel()[kidx] - vals])
         J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
         return r, J
@@ -131,8 +131,8 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     names = list(rates)
     kidx = [model.jidx[n] for n in names]
     zero = np.zeros(model.nq)
-    _, Phi_q, h0 = model.phi_fn(q, t, p)  # h(q, 0, t) = Phi_t
-    _, _, c_q = model.coord_fn(q, zero)
+    _, Phi_q, h0 = model.phi(q, t, p)  # h(q, 0, t) = Phi_t
+    _, _, c_q = model.coord(q, zero)
     J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
     rhs = np.concatenate([-np.asarray(h0).ravel()[act], [rates[n] for n in names]])
     if J.shape[0] != J.shape[1]:

@@ -235,7 +235,7 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
         joint, side, kind = which
         if kind == "gap":
             k = model.jidx[joint]
-            _, cd, _ = model.coord_fn(q, v)
+            _, cd, _ = model.coord(q, v)
             cdv = float(np.asarray(cd).ravel()[k])
             if (cdv >= 0.0 and side == "lower") or (cdv <= 0.0 and side == "upper"):
                 # Moving away from the stop: a round-off root, not an impact.
@@ -256,7 +256,7 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
             _append_event(events, out.event, opts, rec, t, q, v, hs)
             if not out.locked:
                 last_bounce[joint] = t
-                c, _, _ = model.coord_fn(q, v)
+                c, _, _ = model.coord(q, v)
                 # A first step long enough that round-off in the gap cannot read as a crossing.
                 first_step = 1e3 * np.finfo(float).eps * (1 + abs(float(np.asarray(c)
                                                                           .ravel()[k]))) \
@@ -336,7 +336,7 @@ class _Segment:
             return
         nq = self.model.nq
         q, v = y[:nq], y[nq:2 * nq]
-        c, _, _ = self.model.coord_fn(q, v)
+        c, _, _ = self.model.coord(q, v)
         c = np.asarray(c).ravel()
         lam = None
         if any(kind == "push" for _, _, kind in self.events):

@@ -92,10 +92,10 @@ def event_list(hs: HybridState) -> list[tuple[str, str, str]]:
 
 def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> np.ndarray:
     """Minimal-norm Newton projection of q onto the active position constraints."""
-    free = np.asarray(model.free_fn(p)).ravel()
+    free = model.free(p)[0]
     act = np.flatnonzero(free == 0.0)
     for _ in range(10):
-        phi, Phi_q, _ = model.phi_fn(q, t, p)
+        phi, Phi_q, _ = model.phi(q, t, p)
         r = np.asarray(phi).ravel()[act]
         if np.max(np.abs(r), initial=0.0) < 1e-15:
             break
@@ -107,9 +107,9 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> n
 def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
                        ) -> np.ndarray:
     """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows)."""
-    free = np.asarray(model.free_fn(p)).ravel()
+    free = model.free(p)[0]
     act = np.flatnonzero(free == 0.0)
-    _, Phi_q, Phi_t = model.phi_fn(q, t, p)
+    _, Phi_q, Phi_t = model.phi(q, t, p)
     J = np.asarray(Phi_q)[act]
     r = J @ v + np.asarray(Phi_t).ravel()[act]
     return v - J.T @ np.linalg.solve(J @ J.T, r)
@@ -123,10 +123,10 @@ def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarr
     prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
     Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
     """
-    _, Phi_q, h0 = model.phi_fn(q, t, p)
+    _, Phi_q, h0 = model.phi(q, t, p)
     Phi_q = np.asarray(Phi_q)
     b = -np.asarray(h0).ravel()  # -Phi_t: drivers keep their velocity, locks keep 0
-    free = np.asarray(model.free_fn(p)).ravel()
+    free = model.free(p)[0]
     b[free != 0.0] = 0.0
     if lock_row is not None:
         b[lock_row] = target
@@ -157,7 +157,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     model = hs.model
     k = model.jidx[joint]
     before = hs.current()
-    _, cd_minus, _ = model.coord_fn(q, v)
+    _, cd_minus, _ = model.coord(q, v)
     cdm = float(np.asarray(cd_minus).ravel()[k])
     e = model.mech.joints[joint].restitution
     T_minus = 0.5 * np.sum(model.mass * v**2)
@@ -195,7 +195,7 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
     side = hs.locked.pop(joint)
     after = hs.current()
     k = hs.model.jidx[joint]
-    _, cd, _ = hs.model.coord_fn(q, v)
+    _, cd, _ = hs.model.coord(q, v)
     cdv = float(np.asarray(cd).ravel()[k])
     return Event(t, "release", joint, side, before, after, cdv, cdv, {}, 0.0, float(force))
 
@@ -210,7 +210,7 @@ def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     """
     model = hs.model
     a, _, _ = model.kkt(q, v, t, hs.p)
-    _, _, cdd, _ = model.post_fn(q, v, a, t)
+    _, _, cdd, _ = model.post1(q, v, a, t)
     acc = float(np.asarray(cdd).ravel()[model.jidx[joint]])
     into = -acc if side == "lower" else acc
     return into > 1e-9 * (1.0 + float(np.max(np.abs(a))))
