@@ -13,11 +13,14 @@ from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError
 from .iterative import run_iterative
 from .loader import from_dict, load
 from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
+from .report import Comparison, compare
 from .result import Configuration, Event, Result, Stats, load_result
 from .structure import Group, Structure, labeller, structure
+from .studies import convergence, work_precision
 
 __all__ = [
-    "AssemblyError", "Body", "CmmError", "Configuration", "Damper", "Driver", "Event",
+    "AssemblyError", "Body", "CmmError", "Comparison", "Configuration", "compare",
+    "convergence", "work_precision", "Damper", "Driver", "Event",
     "Initial", "Joint", "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result",
     "SolverError", "Spring", "Stats", "Group", "Structure", "from_dict", "labeller", "load",
     "load_result", "run_dae", "run_iterative", "structure",

@@ -1,7 +1,8 @@
-"""Command line: ``cmm-dae run MODEL``, ``cmm-dae events MODEL|RESULT``, ``cmm-dae structure``.
+"""Command line interface ``cmm-dae``.
 
-Bad input gives a clear one-paragraph message on stderr and a non-zero exit code, never a
-traceback.
+Commands: ``run``, ``iterate``, ``compare``, ``events``, ``structure``, ``animate``, ``plot``.
+Bad input gives a clear message on stderr and a non-zero exit code (2: bad input, 3: the
+run failed part-way), never a traceback.
 """
 
 from __future__ import annotations
@@ -13,24 +14,17 @@ from pathlib import Path
 from .errors import CmmError, SolverError
 
 
-def _run(args: argparse.Namespace) -> int:
-    from . import load, run_dae
+def _load(path: str):
+    from . import load
 
-    mech = load(args.model)
-    res = run_dae(mech, args.t_end, rtol=args.rtol, atol=args.atol, output_dt=args.output_dt)
-    _summary(res)
-    if args.csv:
-        print(f"wrote {res.to_csv(args.csv)}")
-    if args.save:
-        print(f"wrote {res.save(args.save)}")
-    return 0
+    return load(path)
 
 
 def _summary(res) -> None:
     s = res.stats
-    print(f"{res.meta['mechanism']}: t = {res.t[0]:g} .. {res.t[-1]:g} s, {res.t.size} samples, "
-          f"{s.steps} steps, {s.nfev} residual / {s.njev} Jacobian evaluations, "
-          f"{len(res.events)} events, wall {s.wall_time * 1e3:.1f} ms "
+    print(f"{res.meta['mechanism']} ({s.method}): t = {res.t[0]:g} .. {res.t[-1]:g} s, "
+          f"{res.t.size} samples, {s.steps} steps, {s.nfev} residual / {s.njev} Jacobian "
+          f"evaluations, {len(res.events)} events, wall {s.wall_time * 1e3:.1f} ms "
           f"(model build {s.build_time * 1e3:.1f} ms)")
     pos, vel = res.drift
     print(f"constraint drift: |Phi| <= {pos:.2e}, |Phi'| <= {vel:.2e}")
@@ -41,47 +35,179 @@ def _summary(res) -> None:
         print(res.event_table())
 
 
+def _save(res, args) -> None:
+    if getattr(args, "csv", None):
+        print(f"wrote {res.to_csv(args.csv)}")
+    if getattr(args, "save", None):
+        print(f"wrote {res.save(args.save)}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from . import run_dae
+
+    res = run_dae(_load(args.model), args.t_end, rtol=args.rtol, atol=args.atol,
+                  output_dt=args.output_dt)
+    _summary(res)
+    _save(res, args)
+    return 0
+
+
+def _iterate(args: argparse.Namespace) -> int:
+    from . import run_iterative
+
+    res = run_iterative(_load(args.model), args.t_end, dt=args.dt)
+    _summary(res)
+    _save(res, args)
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from . import Model, compare, run_dae, run_iterative
+    from .plots import work_precision as wp_plot
+    from .studies import work_precision
+
+    mech = _load(args.model)
+    model = Model(mech)
+    a = run_dae(mech, args.t_end, rtol=args.rtol, atol=args.rtol * 1e-2, output_dt=args.dt,
+                model=model)
+    b = run_iterative(mech, args.t_end, dt=args.dt, model=model)
+    cmp = compare(a, b)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.no_work_precision and mech.drivers:
+        wp = work_precision(mech, t_end=args.t_end, model=model)
+        cmp.work_precision = wp
+        cmp.extra_figures["Work-precision: error in the driving effort vs wall time"] = wp_plot(
+            wp["rows"], out / "work_precision.png",
+            f"{mech.name}: driving-effort error vs wall time\n(reference: IDA at rtol "
+            f"{wp['reference_rtol']:g}, errors away from events)")
+    path = cmp.write_report(out)
+    print(cmp.table())
+    print(f"wrote {path} and {path.with_suffix('.html')}")
+    return 0
+
+
 def _events(args: argparse.Namespace) -> int:
-    from . import load, load_result, run_dae
+    from . import load_result, run_dae
 
     path = Path(args.source)
-    res = load_result(path) if path.suffix == ".npz" else run_dae(load(path), args.t_end)
+    if path.suffix == ".npz":
+        if not path.is_file():
+            raise CmmError(f"no such result file: '{path}'")
+        res = load_result(path)
+    else:
+        res = run_dae(_load(args.source), args.t_end)
     print(res.event_table())
     return 0
 
 
 def _structure(args: argparse.Namespace) -> int:
-    from . import load
     from .structure import structure
 
-    print(structure(load(args.model)))
+    print(structure(_load(args.model)))
+    return 0
+
+
+def _result_of(source: str, t_end: float):
+    from . import load_result, run_dae
+
+    path = Path(source)
+    if path.suffix == ".npz":
+        if not path.is_file():
+            raise CmmError(f"no such result file: '{path}'")
+        return load_result(path)
+    return run_dae(_load(source), t_end)
+
+
+def _animate(args: argparse.Namespace) -> int:
+    from .plots import animate
+
+    res = _result_of(args.source, args.t_end)
+    print(f"wrote {animate(res, args.out, fps=args.fps, max_frames=args.frames)}")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from . import plots
+
+    res = _result_of(args.source, args.t_end)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    if res.meta["drivers"]:
+        written.append(plots.driving_effort([res], out / "driving.png"))
+    meta = res.meta.get("metamorphic", [])
+    if meta:
+        written.append(plots.joint_motion([res], meta, out / "joints.png"))
+        written += [plots.joint_forces([res], j, out / f"forces_{j}.png") for j in meta]
+    written.append(plots.timeline([res], out / "timeline.png"))
+    for p in written:
+        print(f"wrote {p}")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
-                                 "mechanisms: index-reduced DAE on SUNDIALS IDA.")
+                                 "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
+                                 "against the paper's fixed-step iterative algorithm.")
     sub = ap.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="simulate a model file with IDA and print a summary")
-    r.add_argument("model", help="mechanism TOML file")
-    r.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+
+    def common(p, model_help="mechanism TOML file"):
+        p.add_argument("model", help=model_help)
+        p.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+
+    r = sub.add_parser("run", help="simulate a model with IDA and print a summary")
+    common(r)
     r.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance (1e-8)")
     r.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance (1e-10)")
     r.add_argument("--output-dt", type=float, default=0.01, help="output spacing, s (0.01)")
     r.add_argument("--csv", help="write every series to this CSV file")
     r.add_argument("--save", help="save the Result to this .npz file")
     r.set_defaults(func=_run)
-    e = sub.add_parser("events", help="print the event table of a model run or a saved result")
+
+    i = sub.add_parser("iterate", help="simulate a model with the paper's fixed-step algorithm")
+    common(i)
+    i.add_argument("--dt", type=float, default=0.01, help="fixed step, s (0.01, as the paper)")
+    i.add_argument("--csv", help="write every series to this CSV file")
+    i.add_argument("--save", help="save the Result to this .npz file")
+    i.set_defaults(func=_iterate)
+
+    c = sub.add_parser("compare", help="IDA vs the iterative algorithm: report with figures")
+    common(c)
+    c.add_argument("--dt", type=float, default=0.01, help="iterative step and output spacing")
+    c.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
+    c.add_argument("--out", required=True, help="directory for report.md/.html and PNGs")
+    c.add_argument("--no-work-precision", action="store_true",
+                   help="skip the work-precision sweep (a few seconds)")
+    c.set_defaults(func=_compare)
+
+    e = sub.add_parser("events", help="event table of a model run or of a saved result")
     e.add_argument("source", help="mechanism TOML file or saved result (.npz)")
     e.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     e.set_defaults(func=_events)
+
     s = sub.add_parser("structure", help="mobility, active parts and Assur groups")
     s.add_argument("model", help="mechanism TOML file")
     s.set_defaults(func=_structure)
+
+    a = sub.add_parser("animate", help="GIF of the mechanism moving (locked joints in red)")
+    a.add_argument("source", help="mechanism TOML file or saved result (.npz)")
+    a.add_argument("--out", required=True, help="output .gif")
+    a.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    a.add_argument("--fps", type=int, default=20, help="frames per second (20)")
+    a.add_argument("--frames", type=int, default=200, help="most frames (200)")
+    a.set_defaults(func=_animate)
+
+    p = sub.add_parser("plot", help="paper-style figures of one run")
+    p.add_argument("source", help="mechanism TOML file or saved result (.npz)")
+    p.add_argument("--out", required=True, help="directory for the PNGs")
+    p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    p.set_defaults(func=_plot)
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``cmm-dae``; returns the exit code."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
@@ -89,6 +215,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"cmm-dae: {err}", file=sys.stderr)
         return 3
     except CmmError as err:
+        print(f"cmm-dae: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:
         print(f"cmm-dae: {err}", file=sys.stderr)
         return 2
 

@@ -109,5 +109,14 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         "joint_types": [j.type for j in mech.joints.values()],
         "drivers": model.driver_names,
         "rows": [f"{r.kind} {r.name}" for r in model.rows],
+        "gravity": list(mech.gravity),
+        "springs": {n: [j.spring.stiffness, j.spring.rest] for n, j in mech.joints.items()
+                    if j.spring is not None},
+        "dampers": {n: j.damper.damping for n, j in mech.joints.items() if j.damper is not None},
+        "metamorphic": model.locks,
+        "body_points": {n: {k: list(v) for k, v in b.points.items()}
+                        for n, b in mech.bodies.items()},
+        "ground": {k: list(v) for k, v in mech.ground.items()},
+        "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
     }
     return Result(meta, data, configurations, events, stats, status)

@@ -1,0 +1,256 @@
+"""Figures in the style of the paper (Figs. 16-19, 23), difference plots, event timelines,
+work-precision diagrams and animations. Matplotlib with the Agg backend (no screen needed).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .result import Result  # noqa: E402
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .report import Comparison
+
+STYLE = {0: dict(color="tab:blue", lw=1.6), 1: dict(color="tab:red", lw=1.0, ls="--")}
+
+
+def _label(res: Result) -> str:
+    m = res.stats.method
+    return {"ida": "IDA (index-2 DAE)", "iterative": "iterative algorithm"}.get(m, m or "run")
+
+
+def _event_lines(ax, res: Result) -> None:
+    for e in res.events:
+        ax.axvline(e.t, color="0.6", lw=0.6, ls=":")
+
+
+def _unit(res: Result, joint: str) -> str:
+    i = res.meta["joints"].index(joint)
+    return "rad" if res.meta["joint_types"][i] == "revolute" else "m"
+
+
+def driving_effort(results: list[Result], path: Path) -> Path:
+    """Driving torque/force vs time for each result (paper Figs. 16 and 23)."""
+    r0 = results[0]
+    drivers = r0.meta["drivers"]
+    fig, axes = plt.subplots(len(drivers), 1, figsize=(8, 3.2 * len(drivers)), squeeze=False)
+    for ax, name in zip(axes[:, 0], drivers, strict=True):
+        for k, r in enumerate(results):
+            ax.plot(r.t, r.driver(name).effort, label=_label(r), **STYLE[k % 2])
+        _event_lines(ax, r0)
+        unit = "N m" if _unit(r0, name) == "rad" else "N"
+        what = "torque" if unit == "N m" else "force"
+        ax.set(xlabel="time [s]", ylabel=f"driving {what} [{unit}]",
+               title=f"{r0.meta['mechanism']}: driving {what} at joint {name}")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def joint_motion(results: list[Result], joints: list[str], path: Path) -> Path:
+    """Relative motion of the metamorphic joints vs time (paper Fig. 17)."""
+    r0 = results[0]
+    fig, axes = plt.subplots(len(joints), 1, figsize=(8, 2.8 * len(joints)), squeeze=False)
+    for ax, name in zip(axes[:, 0], joints, strict=True):
+        for k, r in enumerate(results):
+            ax.plot(r.t, r.joint(name).position, label=_label(r), **STYLE[k % 2])
+        _event_lines(ax, r0)
+        ax.set(xlabel="time [s]", ylabel=f"joint {name} [{_unit(r0, name)}]",
+               title=f"relative motion of metamorphic joint {name}")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
+    """Constraint force components and torque of one joint vs time (paper Figs. 18-19)."""
+    r0 = results[0]
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    comps = [("force x [N]", lambda j: j.force[:, 0]), ("force y [N]", lambda j: j.force[:, 1]),
+             ("torque [N m]", lambda j: j.torque)]
+    for ax, (lab, get) in zip(axes, comps, strict=True):
+        for k, r in enumerate(results):
+            ax.plot(r.t, get(r.joint(joint)), label=_label(r), **STYLE[k % 2])
+        _event_lines(ax, r0)
+        ax.set_ylabel(lab)
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"{r0.meta['mechanism']}: constraint force/torque of joint {joint}\n"
+                      "(first body on the second; torque about the second body's connect "
+                      "point)", fontsize=10)
+    axes[0].legend()
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def differences(cmp: Comparison, path: Path) -> Path:
+    """Differences a - b of the driving efforts and metamorphic-joint coordinates."""
+    from .report import _interp
+
+    a, b, t = cmp.a, cmp.b, cmp.t
+    names = [("driver", n) for n in a.meta["drivers"]] + \
+        [("joint", n) for n in a.meta.get("metamorphic", [])]
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.6 * max(1, len(names))),
+                             squeeze=False, sharex=True)
+    for ax, (kind, n) in zip(axes[:, 0], names, strict=True):
+        if kind == "driver":
+            ya, yb = a.driver(n).effort, b.driver(n).effort
+            unit = "N m" if _unit(a, n) == "rad" else "N"
+            lab = f"driver {n} effort"
+        else:
+            ya, yb = a.joint(n).position, b.joint(n).position
+            unit, lab = _unit(a, n), f"joint {n} position"
+        d = _interp(t, a, ya) - _interp(t, b, yb)
+        ax.plot(t, np.where(cmp.mask, d, np.nan), color="k", lw=1.0)
+        _event_lines(ax, a)
+        ax.set_ylabel(f"diff [{unit}]")
+        ax.set_title(f"{lab}: {_label(a)} minus {_label(b)} (near events left out)")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def timeline(results: list[Result], path: Path) -> Path:
+    """Configuration bands and events of each result along time."""
+    labels: list[str] = []
+    for r in results:
+        for c in r.configurations:
+            txt = c.label + (f" [{','.join(c.locked)}]" if c.locked else "")
+            if txt not in labels:
+                labels.append(txt)
+    colors = plt.cm.tab10(np.arange(len(labels)) % 10)
+    fig, ax = plt.subplots(figsize=(9, 1.2 + 0.7 * len(results)))
+    for row, r in enumerate(results):
+        cfg = r.configuration
+        start = 0
+        for i in range(1, r.t.size + 1):
+            if i == r.t.size or cfg[i] != cfg[start]:
+                c = r.configurations[cfg[start]]
+                txt = c.label + (f" [{','.join(c.locked)}]" if c.locked else "")
+                ax.barh(row, r.t[min(i, r.t.size - 1)] - r.t[start], left=r.t[start],
+                        color=colors[labels.index(txt)], height=0.6)
+                start = i
+        for e in r.events:
+            ax.plot(e.t, row, "kv", ms=5)
+    ax.set_yticks(range(len(results)), [_label(r) for r in results])
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colors[i]) for i in range(len(labels))]
+    ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.35),
+              ncol=min(3, len(labels)), fontsize=8)
+    ax.set(xlabel="time [s]", title=f"{results[0].meta['mechanism']}: configurations "
+           "(bands) and events (triangles)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
+    """Every figure of a comparison report, written into ``out``."""
+    res = [cmp.a, cmp.b]
+    figs = {"Driving effort (paper Figs. 16, 23)": driving_effort(res, out / "driving.png")}
+    meta = cmp.a.meta.get("metamorphic", [])
+    if meta:
+        figs["Relative motion of the metamorphic joints (paper Fig. 17)"] = joint_motion(
+            res, meta, out / "joints.png")
+        for j in meta:
+            figs[f"Constraint force/torque of joint {j} (paper Figs. 18-19)"] = joint_forces(
+                res, j, out / f"forces_{j}.png")
+    figs["Differences"] = differences(cmp, out / "differences.png")
+    figs["Event timeline"] = timeline(res, out / "timeline.png")
+    return figs
+
+
+def work_precision(rows: list[dict], path: Path, title: str) -> Path:
+    """Error vs wall time, one line per method."""
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for k, method in enumerate(dict.fromkeys(r["method"] for r in rows)):
+        pts = [r for r in rows if r["method"] == method]
+        ax.loglog([p["wall"] for p in pts], [p["error"] for p in pts], "o-",
+                  label=method, color=f"C{k}")
+        for p in pts:
+            ax.annotate(p["setting"], (p["wall"], p["error"]), fontsize=7,
+                        textcoords="offset points", xytext=(4, 4))
+    ax.set(xlabel="wall time [s]", ylabel="max driving-effort error [N m]")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def animate(res: Result, path: str | Path, *, fps: int = 20, max_frames: int = 200) -> Path:
+    """GIF of the mechanism moving: bodies as polygons through their points, ground points
+    as triangles, metamorphic joints as squares, red while locked and green while free."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    path = Path(path)
+    meta_ = res.meta
+    idx = np.unique(np.linspace(0, res.t.size - 1, min(max_frames, res.t.size)).astype(int))
+    poses = {b: res.body(b).pose for b in meta_["bodies"]}
+
+    def world(body: str, xy) -> np.ndarray:
+        if body == "ground":
+            return np.broadcast_to(np.asarray(meta_["ground"][xy], float), (res.t.size, 2))
+        P = poses[body]
+        c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
+        x, y = xy
+        return np.column_stack([P[:, 0] + c * x - s * y, P[:, 1] + s * x + c * y])
+
+    tracks = {b: [world(b, xy) for xy in pts.values()] for b, pts in meta_["body_points"].items()}
+    jpos = {}
+    for j in meta_.get("metamorphic", []):
+        body, pt = meta_["connects"][j][1].split(".", 1)
+        jpos[j] = world(body, pt if body == "ground" else meta_["body_points"][body][pt])
+    allpts = np.vstack([tr for trs in tracks.values() for tr in trs]
+                       + [np.asarray(list(meta_["ground"].values()), float).reshape(-1, 2)])
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    pad = 0.1 * float(max(hi - lo))
+    fig, ax = plt.subplots(figsize=(6, 6))
+
+    def draw(k):
+        i = idx[k]
+        ax.clear()
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_aspect("equal")
+        ax.set(xlabel="x [m]", ylabel="y [m]")
+        cfg = res.configurations[res.configuration[i]]
+        ax.set_title(f"{meta_['mechanism']}   t = {res.t[i]:.2f} s\n{cfg.label}", fontsize=9)
+        for gx, gy in meta_["ground"].values():
+            ax.plot(gx, gy, "k^", ms=9)
+        for b, trs in tracks.items():
+            xy = np.array([tr[i] for tr in trs])
+            if len(xy) > 2:
+                xy = np.vstack([xy, xy[:1]])
+            ax.plot(xy[:, 0], xy[:, 1], "-o", lw=3, ms=4, label=b)
+        for j, tr in jpos.items():
+            locked = j in cfg.locked
+            ax.plot(tr[i, 0], tr[i, 1], "s", ms=11, mfc="none", mew=2.5,
+                    color="red" if locked else "green",
+                    label=f"joint {j}: {'locked' if locked else 'free'}")
+        ax.legend(loc="upper right", fontsize=7)
+
+    anim = FuncAnimation(fig, draw, frames=len(idx))
+    anim.save(path, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return path
