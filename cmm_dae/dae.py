@@ -157,10 +157,10 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: f
     wall0 = time.perf_counter()
     if model is None:
         model = Model(mech)
-    from .structure import labeller
+    from .structure import force_constraint_joints, labeller
 
     build = time.perf_counter() - wall0
-    hs = ev.HybridState(model, labeller(mech))
+    hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
     stats = Stats(build_time=build, method="ida")
     opts = Options(float(t_end), rtol, atol, output_dt, max_events, v_lock, max_steps)
     q, v, events = start_state(model, hs)
@@ -253,6 +253,8 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
             del hs.locked[joint]
             out = ev.at_limit(hs, q, v, t, joint, side, opts.v_lock, last_bounce.get(joint))
             v = out.v
+            for e in out.jammed:
+                _append_event(events, e, opts, None, t, q, v, hs)
             _append_event(events, out.event, opts, rec, t, q, v, hs)
             if not out.locked:
                 last_bounce[joint] = t
@@ -283,7 +285,8 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
 def _append_event(events: list[Event], e: Event, opts: Options, rec: _Recorder, t: float,
                   q: np.ndarray, v: np.ndarray, hs: ev.HybridState) -> None:
     events.append(e)
-    rec.add(t, q, v, hs.current())
+    if rec is not None:
+        rec.add(t, q, v, hs.current())
     if len(events) > opts.max_events:
         raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s "
                           f"(last: {e.kind} of joint {e.joint})")

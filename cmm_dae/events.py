@@ -26,6 +26,7 @@ class HybridState:
     model: Model
     labeller: object = None  # callable(locked: dict[str, str]) -> (label, dof)
     locked: dict[str, str] = field(default_factory=dict)
+    force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
     configurations: list[Configuration] = field(default_factory=list)
     params: list[np.ndarray] = field(default_factory=list)
     _index: dict[tuple, int] = field(default_factory=dict)
@@ -100,7 +101,8 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> n
         if np.max(np.abs(r), initial=0.0) < 1e-15:
             break
         J = np.asarray(Phi_q)[act]
-        q = q - J.T @ np.linalg.solve(J @ J.T, r)
+        # least squares: a new lock may make the rows dependent until a jam is resolved
+        q = q - np.linalg.lstsq(J, r, rcond=None)[0]
     return q
 
 
@@ -112,7 +114,7 @@ def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: 
     _, Phi_q, Phi_t = model.phi(q, t, p)
     J = np.asarray(Phi_q)[act]
     r = J @ v + np.asarray(Phi_t).ravel()[act]
-    return v - J.T @ np.linalg.solve(J @ J.T, r)
+    return v - np.linalg.lstsq(J, r, rcond=None)[0]
 
 
 def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
@@ -138,12 +140,52 @@ def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarr
 
 @dataclass
 class LimitOutcome:
-    """What a limit event does: the new velocities, the event record, whether it locked."""
+    """What a limit event does: the new velocities, the event record, whether it locked,
+    and the preloaded locks it released first (``jammed``: their release events)."""
 
     v: np.ndarray
     event: Event
     locked: bool
     released_at_once: bool = False
+    jammed: list[Event] = field(default_factory=list)
+
+
+def _over_constrained(hs: HybridState, q: np.ndarray, t: float) -> bool:
+    """True when the active constraint rows of the current locked set are dependent."""
+    model = hs.model
+    free = model.free(hs.p)[0]
+    act = np.flatnonzero(free == 0.0)
+    J = model.phi(q, t, hs.p)[1][act]
+    s = np.linalg.svd(J, compute_uv=False)
+    rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
+    return rank < J.shape[0]
+
+
+def release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                   side: str, force_held: dict[str, str]) -> list[Event]:
+    """Before ``joint`` locks: if the lock would over-constrain (jam) the mechanism, the
+    impact frees locks that it depends on: first joints held on their stops by a preloaded
+    spring (force constraints: the impact beats the preload), then other locks (the impact
+    pulls them off their stops). One release event each, with the lock force just before."""
+    out: list[Event] = []
+    trial = dict(hs.locked)
+    saved = hs.locked
+    hs.locked = dict(trial, **{joint: side})
+    jam = _over_constrained(hs, q, t)
+    hs.locked = saved
+    if not jam:
+        return out
+    order = sorted(saved.items(), key=lambda kv: force_held.get(kv[0]) != kv[1])
+    for other, _ in order:
+        _, lam, _ = hs.model.kkt(q, v, t, hs.p)
+        force = hs.push(lam, other)
+        out.append(release(hs, q, v, t, other, force))
+        hs.locked = dict(hs.locked, **{joint: side})
+        still = _over_constrained(hs, q, t)
+        del hs.locked[joint]
+        if not still:
+            break
+    return out
 
 
 def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str, side: str,
@@ -156,6 +198,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     """
     model = hs.model
     k = model.jidx[joint]
+    jammed = release_jammed(hs, q, v, t, joint, side, hs.force_held)
     before = hs.current()
     _, cd_minus, _ = model.coord(q, v)
     cdm = float(np.asarray(cd_minus).ravel()[k])
@@ -180,7 +223,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         del hs.locked[joint]
     after = hs.current()
     ev = Event(t, kind, joint, side, before, after, cdm, cdp, impulses, lost)
-    out = LimitOutcome(v_plus, ev, not bounce)
+    out = LimitOutcome(v_plus, ev, not bounce, jammed=jammed)
     if not bounce:
         _, lam, _ = model.kkt(q, v_plus, t, hs.p)
         if hs.push(lam, joint) < 0.0:

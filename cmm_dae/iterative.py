@@ -146,10 +146,10 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
         raise ModelError(problems)
     wall0 = time.perf_counter()
     model = model or Model(mech)
-    from .structure import labeller
+    from .structure import force_constraint_joints, labeller
 
     stats = Stats(build_time=time.perf_counter() - wall0, method="iterative")
-    hs = ev.HybridState(model, labeller(mech))
+    hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
     q, v, events = start_state(model, hs)
     T, Q, V, C = [0.0], [q], [v], [hs.current()]
     status, err = "success", None
@@ -212,6 +212,8 @@ def _switch(model: Model, hs: ev.HybridState, q: np.ndarray, v: np.ndarray, t: f
     c, cd, _ = (np.asarray(x).ravel() for x in model.coord(q, v))
     for joint, side, kind in ev.event_list(hs):
         k = model.jidx[joint]
+        if (kind == "gap") == (joint in hs.locked):
+            continue  # an earlier switch of this step changed this joint already
         if kind == "gap":
             L = hs.limit_value(joint, side)
             beyond = (L - c[k]) if side == "lower" else (c[k] - L)
@@ -224,6 +226,7 @@ def _switch(model: Model, hs: ev.HybridState, q: np.ndarray, v: np.ndarray, t: f
             del hs.locked[joint]
             out = ev.at_limit(hs, q, v, t, joint, side, v_lock, None)
             v = out.v
+            events.extend(out.jammed)
             events.append(out.event)
             if out.released_at_once:
                 _, lam, _ = model.kkt(q, v, t, hs.p)

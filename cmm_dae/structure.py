@@ -142,11 +142,21 @@ def _group_name(mech: Mechanism, bodies: set[str], internal: list[str], external
     hub = max(bodies, key=lambda x: degree[x])
     branches = []
     for j in adj[hub]:
+        seq, seen, cur = [j], {j}, hub
         jj = mech.joints[j]
-        other = jj.second_body if jj.first_body == hub else jj.first_body
-        ext = [e for e in external if other in (mech.joints[e].first_body,
-                                                mech.joints[e].second_body)]
-        branches.append("".join(_letter(mech, e) for e in ext) + _letter(mech, j))
+        cur = jj.second_body if jj.first_body == hub else jj.first_body
+        while True:  # walk out along the branch to its external joint(s)
+            nxt = [k for k in adj[cur] if k not in seen]
+            if not nxt or degree[cur] > 2:
+                break
+            k = nxt[0]
+            seq.append(k)
+            seen.add(k)
+            kk = mech.joints[k]
+            cur = kk.second_body if kk.first_body == cur else kk.first_body
+        ext = [e for e in external if cur in (mech.joints[e].first_body,
+                                              mech.joints[e].second_body)]
+        branches.append("".join(_letter(mech, e) for e in ext + seq[::-1]))
     hub_ext = [e for e in external if hub in (mech.joints[e].first_body,
                                               mech.joints[e].second_body)]
     if hub_ext:
@@ -206,7 +216,15 @@ def structure(mech: Mechanism) -> Structure:
                     known.add(b)
                     active.append(b)
                     changed = True
-    remaining = [b for b in mech.bodies if b not in known]
+    # Joints held on a stop by a preloaded spring weld their two bodies in the natural
+    # state of the mechanism (the paper: "5 and 6 combined into one component").
+    welded = force_constraint_joints(mech)
+    rep = _merge(mech, set(welded))
+    units: dict[str, set[str]] = {}
+    for b in mech.bodies:
+        if rep[b] != GROUND and b not in known:
+            units.setdefault(rep[b], set()).add(b)
+    remaining = list(units)
     groups: list[Group] = []
 
     def joints_of(S: set[str]) -> tuple[list[str], list[str]]:
@@ -222,7 +240,6 @@ def structure(mech: Mechanism) -> Structure:
         return internal, external
 
     def connected(S: set[str], internal: list[str]) -> bool:
-        S = set(S)
         start = next(iter(S))
         seen, stack = {start}, [start]
         while stack:
@@ -235,45 +252,49 @@ def structure(mech: Mechanism) -> Structure:
                         stack.append(b)
         return seen == S
 
-    def try_find(target: int) -> Group | None:
+    def try_find(target: int, single: bool = False) -> Group | None:
+        """Smallest group of ``remaining`` units with ``target`` DOF; an augmented group
+        must leave at least two bodies once locked (else it is a link welded to a known
+        body), unless ``single`` allows that as a last resort."""
         for size in range(1, len(remaining) + 1):
             for combo in combinations(remaining, size):
-                S = set(combo)
+                S = set().union(*(units[u] for u in combo))
                 internal, external = joints_of(S)
-                # every joint of S must go to S or to known bodies
-                if any((j.first_body in S) != (j.second_body in S)
-                       and not ({j.first_body, j.second_body} - S) <= known
-                       for n, j in joints.items() if n not in mech.drivers
-                       and (j.first_body in S or j.second_body in S)):
-                    continue
                 if not connected(S, internal):
                     continue
-                f = 3 * len(S) - 2 * (len(internal) + len(external))
+                live = [j for j in internal if j not in welded]
+                f = 3 * len(combo) - 2 * (len(live) + len(external))
                 meta = tuple(j for j in internal + external if j in metamorphic)
-                if f != target or (target == 1 and not meta):
+                if f != target or (target == 1 and not [m for m in meta if m not in welded]):
                     continue
                 name = _group_name(mech, S, internal, external)
-                deg = [sum(b in (joints[j].first_body, joints[j].second_body) for j in internal)
-                       for b in S]
-                if target == 1:  # class once one metamorphic joint locks
-                    rep = _merge(mech, {meta[0]})
-                    merged = {rep[b] for b in S} - {GROUND}
-                    cls = _class(len(merged), [d for d in deg])
+                deg = [sum(rep[b] == u for j in live for b in (joints[j].first_body,
+                                                               joints[j].second_body))
+                       for u in combo]
+                if target == 1:  # class once one (geometric) metamorphic joint locks
+                    lock = next(m for m in meta if m not in welded)
+                    rep2 = _merge(mech, set(welded) | {lock})
+                    n_locked = len({rep2[b] for b in S} - {GROUND})
+                    if n_locked < 2 and not single:
+                        continue
+                    cls = _class(n_locked, deg)
                 else:
-                    cls = _class(len(S), deg)
+                    cls = _class(len(combo), deg)
+                augmented = target == 1 or any(m in welded for m in meta)
                 return Group(name, cls, tuple(sorted(S, key=list(mech.bodies).index)),
-                             tuple(internal), tuple(external), target == 1, meta)
+                             tuple(internal), tuple(external), augmented, meta)
         return None
 
     while remaining:
-        g = try_find(0) or try_find(1)
+        g = try_find(0) or try_find(1) or try_find(1, single=True)
         if g is None:
             break
         groups.append(g)
         known.update(g.bodies)
-        remaining = [b for b in remaining if b not in known]
-    return Structure(mech.name, mobility, tuple(active), tuple(groups), tuple(remaining),
-                     tuple(force_constraint_joints(mech)))
+        remaining = [u for u in remaining if not units[u] <= known]
+    left = [b for u in remaining for b in sorted(units[u], key=list(mech.bodies).index)]
+    return Structure(mech.name, mobility, tuple(active), tuple(groups), tuple(left),
+                     tuple(welded))
 
 
 def configuration_label(st: Structure, locked: dict[str, str],
