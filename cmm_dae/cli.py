@@ -136,7 +136,9 @@ def _plot(args: argparse.Namespace) -> int:
     written = []
     if res.meta["drivers"]:
         written.append(plots.driving_effort([res], out / "driving.png"))
-    meta = res.meta.get("metamorphic", [])
+    from .report import watched_joints
+
+    meta = watched_joints(res)
     if meta:
         written.append(plots.joint_motion([res], meta, out / "joints.png"))
         written += [plots.joint_forces([res], j, out / f"forces_{j}.png") for j in meta]

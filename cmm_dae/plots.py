@@ -103,8 +103,10 @@ def differences(cmp: Comparison, path: Path) -> Path:
     from .report import _interp
 
     a, b, t = cmp.a, cmp.b, cmp.t
+    from .report import watched_joints
+
     names = [("driver", n) for n in a.meta["drivers"]] + \
-        [("joint", n) for n in a.meta.get("metamorphic", [])]
+        [("joint", n) for n in watched_joints(a)]
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.6 * max(1, len(names))),
                              squeeze=False, sharex=True)
     for ax, (kind, n) in zip(axes[:, 0], names, strict=True):
@@ -166,7 +168,9 @@ def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
     """Every figure of a comparison report, written into ``out``."""
     res = [cmp.a, cmp.b]
     figs = {"Driving effort (paper Figs. 16, 23)": driving_effort(res, out / "driving.png")}
-    meta = cmp.a.meta.get("metamorphic", [])
+    from .report import watched_joints
+
+    meta = watched_joints(cmp.a)
     if meta:
         figs["Relative motion of the metamorphic joints (paper Fig. 17)"] = joint_motion(
             res, meta, out / "joints.png")

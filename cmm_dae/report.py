@@ -183,7 +183,7 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     for name in a.meta["drivers"]:
         unit = "N m" if types[name] == "revolute" else "N"
         add(f"driver {name} effort", unit, a.driver(name).effort, b.driver(name).effort)
-    for name in a.meta.get("metamorphic", []) or _spring_joints(a):
+    for name in watched_joints(a):
         rev = types[name] == "revolute"
         ja, jb = a.joint(name), b.joint(name)
         add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position)
@@ -193,9 +193,13 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     return Comparison(a, b, t, mask, series, match_events(a, b))
 
 
-def _spring_joints(res: Result) -> list[str]:
-    """Joints worth comparing when there are no metamorphic ones: sprung, else all."""
-    return list(res.meta.get("springs", {})) or list(res.meta["joints"])
+def watched_joints(res: Result) -> list[str]:
+    """The joints a report follows: metamorphic joints (limits: geometric constraints)
+    and sprung joints (force constraints, like the double-folded mechanism's D); all
+    joints when there are neither."""
+    out = list(res.meta.get("metamorphic", []))
+    out += [j for j in res.meta.get("springs", {}) if j not in out]
+    return out or list(res.meta["joints"])
 
 
 def match_events(a: Result, b: Result) -> list[EventMatch]:
