@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -192,6 +193,7 @@ def work_precision(rows: list[dict], path: Path, title: str) -> Path:
         for p in pts:
             ax.annotate(p["setting"], (p["wall"], p["error"]), fontsize=7,
                         textcoords="offset points", xytext=(4, 4))
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set(xlabel="wall time [s]", ylabel="max driving-effort error [N m]")
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3, which="both")
