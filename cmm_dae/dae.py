@@ -172,9 +172,9 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: f
     except (SolverError, KeyboardInterrupt) as e:
         status = str(e) if isinstance(e, SolverError) else "interrupted (KeyboardInterrupt)"
         err = e
-    stats.wall_time = time.perf_counter() - wall0
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
                        stats, status)
+    stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if err is not None:
         if isinstance(err, KeyboardInterrupt) and throw:
             raise SolverError(status, result=res, configuration=hs.current(),
@@ -199,6 +199,12 @@ class _Recorder:
         self.q.append(np.array(q))
         self.v.append(np.array(v))
         self.c.append(c)
+
+    def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int) -> None:
+        self.t.extend(t.tolist())
+        self.q.extend(q)
+        self.v.extend(v)
+        self.c.extend([c] * t.size)
 
     def arrays(self, nq: int):
         n = len(self.t)
@@ -300,6 +306,7 @@ class _Segment:
         self.p = hs.p.copy()
         N, nq = model.N, model.nq
         self.events = ev.event_list(hs)
+        self.has_push = any(kind == "push" for _, _, kind in self.events)
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)
         dummy = np.zeros(N)
@@ -309,7 +316,7 @@ class _Segment:
                                     np.full(model.m, ATOL_MU)])
         self.n_steps = 0
         self.t_last = -math.inf
-        self.tout = math.nan
+        self.outputs: set[float] = set()
 
     def resfn(self, t, y, yp, res):
         self.t_arr[0] = t
@@ -331,20 +338,21 @@ class _Segment:
     def eventsfn(self, t, y, yp, out):
         # IDA checks the roots after every successful step (at the step's end, or at the
         # output time when the step passed it): count steps here.
-        if t > self.t_last and t != self.tout:
+        if t > self.t_last and t not in self.outputs:
             self.t_last = t
             self.n_steps += 1
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
-        if len(self.events) == 0:
+        if not self.events:
             return
-        nq = self.model.nq
-        q, v = y[:nq], y[nq:2 * nq]
-        c, _, _ = self.model.coord(q, v)
-        c = np.asarray(c).ravel()
-        lam = None
-        if any(kind == "push" for _, _, kind in self.events):
-            _, lam, _ = self.model.kkt(q, v, t, self.p)
-        out[1:] = ev.event_values(self.hs, c, lam)
+        model = self.model
+        nq = model.nq
+        q = y[:nq]
+        if self.has_push:  # lock forces by a KKT solve at (q, v, t), never IDA's lambda
+            c, Phi_q, Qf, gamma = model.evparts(q, y[nq:2 * nq], t, self.p)
+            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, self.p)
+        else:
+            c, lam = model.cpos(q)[0], None
+        out[1:] = ev.event_values(self.hs, c, lam, self.events)
 
     def run(self, t0: float, q: np.ndarray, v: np.ndarray, rec: _Recorder, first_step: float,
             stats: Stats):
@@ -370,32 +378,32 @@ class _Segment:
             self.resfn, jacfn=self.jacfn, eventsfn=eventsfn, num_events=ne,
             rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
             first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)))
-        solver.init_step(t0, y0, yp0)
-        n_seen_roots = 0
+        outs = _output_times(opts, t0)
+        tspan = np.concatenate([[t0], outs])
+        extra = None
+        if tspan.size == 2:  # scikit-sundae returns internal steps for a 2-point tspan
+            extra = 0.5 * (tspan[0] + tspan[1])
+            tspan = np.array([tspan[0], extra, tspan[1]])
+        # IDA evaluates the root functions at output times too: not steps
+        self.outputs = set(tspan.tolist())
         try:
-            for tout in _output_times(opts, t0):
-                self.tout = tout
-                r = solver.step(tout, method="normal", tstop=opts.t_end)
-                tt = float(np.atleast_1d(r.t)[0])
-                y = np.asarray(r.y).ravel()
-                if r.status < 0:
-                    self._stats(stats, r)
-                    raise SolverError(self._failure_message(r, tt))
-                if r.status == 2:  # IDA_ROOT_RETURN
-                    self._stats(stats, r)
-                    info = np.asarray(r.i_events)[n_seen_roots]
-                    n_seen_roots += 1
-                    hit = [i - 1 for i in np.flatnonzero(info[1:] != 0) + 1]
-                    rec.add(tt, y[:nq], y[nq:2 * nq], self.hs.current())
-                    return tt, y[:nq].copy(), y[nq:2 * nq].copy(), self.events[hit[0]]
-                rec.add(tt, y[:nq], y[nq:2 * nq], self.hs.current())
-                if tt >= opts.t_end:
-                    break
+            r = solver.solve(tspan, y0, yp0)
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
             raise SolverError(f"the integration failed at t = {self.t_last:.9g} s: {e}") from e
         self._stats(stats, r)
+        T, Y = np.asarray(r.t), np.asarray(r.y)
+        keep = np.arange(1, T.size)
+        if extra is not None:
+            keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
+        rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], self.hs.current())
+        if r.status < 0:
+            raise SolverError(self._failure_message(r, float(T[-1])))
+        if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
+            info = np.asarray(r.i_events)[-1]
+            hit = int(np.flatnonzero(info[1:] != 0)[0])
+            return float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), self.events[hit]
         return None
 
     def _stats(self, stats: Stats, r) -> None:

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.linalg.lapack import dgesv
 
 from .mechanism import GROUND, Driver, Mechanism
 
@@ -73,7 +74,10 @@ class Fast:
 
     def __call__(self, *args) -> list[np.ndarray]:
         for a, x in zip(self.args, args, strict=True):
-            a[:] = np.ravel(x)
+            if np.ndim(x) > 1:
+                a[:] = np.ravel(x, order="F")  # CasADi is column-major
+            else:
+                a[:] = x
         self.call()
         # CasADi stores column-major: a (r, c) matrix is the transpose of a (c, r) C-array
         return [o.reshape(c, r).T.copy() if c > 1 else o.copy()
@@ -217,6 +221,11 @@ class Model:
         self.kkt_parts = Fast(self.kkt_fn)
         self.post1 = Fast(self.post_fn)
         self.free = Fast(self.free_fn)
+        self.cpos = Fast(ca.Function("cpos", [q], [dn(c)]))
+        self.evparts = Fast(ca.Function("evparts", [q, v, t, p],
+                                        [dn(c), dn(Phi_q), dn(Qf), dn(gamma)]))
+        self._kkt_templates: dict[bytes, np.ndarray] = {}
+        self._maps: dict[tuple[str, int], Fast] = {}
 
         # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
         lam = ca.SX.sym("lam", m)
@@ -251,6 +260,15 @@ class Model:
         """Indices of the rows of one joint, driver or lock."""
         return [i for i, r in enumerate(self.rows) if r.kind == kind and r.name == name]
 
+    def mapped(self, name: str, n: int) -> Fast:
+        """``getattr(self, name)`` mapped over n samples, evaluated through the buffer API
+        (converting CasADi matrices to numpy element by element cost more than the
+        evaluation); cached, since building a map costs too."""
+        key = (name, n)
+        if key not in self._maps:
+            self._maps[key] = Fast(getattr(self, name).map(n))
+        return self._maps[key]
+
     def kkt(self, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Accelerations, multipliers and Phi_q from ``[[M, Phi_q^T], [Phi_q, D]]``.
@@ -258,8 +276,23 @@ class Model:
         ``D`` is 1 on the diagonal of inactive lock rows (their multiplier is 0).
         """
         Phi_q, Qf, gamma = self.kkt_parts(q, v, t, p)
-        A = self.kkt_matrix(Phi_q, p)
-        sol = np.linalg.solve(A, np.concatenate([Qf, gamma]))
+        return self.kkt_from(Phi_q, Qf, gamma, p)
+
+    def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The KKT solve of :meth:`kkt` from its already evaluated parts."""
+        key = p.tobytes()
+        tpl = self._kkt_templates.get(key)
+        if tpl is None:  # the constant blocks (M, D) of this configuration, built once
+            tpl = self._kkt_templates[key] = self.kkt_matrix(np.zeros_like(Phi_q), p)
+        A = tpl.copy()
+        A[:self.nq, self.nq:] = Phi_q.T
+        A[self.nq:, :self.nq] = Phi_q
+        # LAPACK directly: half the overhead of numpy.linalg.solve on these small systems
+        _, _, sol, info = dgesv(A, np.concatenate([Qf, gamma]))
+        if info != 0:
+            raise np.linalg.LinAlgError("singular KKT matrix (a dead point or redundant "
+                                        "constraints)")
         return sol[:self.nq], sol[self.nq:], Phi_q
 
     def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:

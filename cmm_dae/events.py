@@ -62,10 +62,12 @@ class HybridState:
         return -lam[k] if self.locked[joint] == "lower" else lam[k]
 
 
-def event_values(hs: HybridState, c: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """Values of the event functions of the current configuration (see :func:`event_list`)."""
+def event_values(hs: HybridState, c: np.ndarray, lam: np.ndarray | None,
+                 events: list[tuple[str, str, str]] | None = None) -> np.ndarray:
+    """Values of the event functions of the current configuration (see :func:`event_list`;
+    pass that list as ``events`` to save building it at every call)."""
     out = []
-    for joint, side, kind in event_list(hs):
+    for joint, side, kind in events if events is not None else event_list(hs):
         if kind == "gap":
             L = hs.limit_value(joint, side)
             k = hs.model.jidx[joint]

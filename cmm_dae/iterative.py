@@ -193,11 +193,11 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
         status = (f"stopped at t = {T[-1]:.6g} s: {e}" if not isinstance(e, KeyboardInterrupt)
                   else "interrupted (KeyboardInterrupt)")
         err = e
-    stats.wall_time = time.perf_counter() - wall0
     nq = model.nq
     res = build_result(model, np.array(T), np.array(Q).reshape(-1, nq),
                        np.array(V).reshape(-1, nq), np.array(C, int), hs.configurations,
                        hs.params, events, stats, status)
+    stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if err is not None and (throw or isinstance(err, ModelError)):
         raise SolverError(status, result=res, configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err

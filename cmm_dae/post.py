@@ -25,17 +25,17 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
     """
     n, nq, m = t.size, model.nq, model.m
-    f = model.kkt_fn.map(n)
-    Phi_q, Qf, gamma = f(q.T, v.T, t[None, :], P.T)
+    Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
     Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
     Qf = np.asarray(Qf).T
     gamma = np.asarray(gamma).T
-    free = np.asarray(model.free_fn.map(n)(P.T)).T
+    free = model.mapped("free_fn", n)(P.T)[0].T
     A = np.zeros((n, nq + m, nq + m))
-    A[:, range(nq), range(nq)] = model.mass
+    d = np.arange(nq + m)
+    A[:, d[:nq], d[:nq]] = model.mass
     A[:, :nq, nq:] = Phi_q.transpose(0, 2, 1)
     A[:, nq:, :nq] = Phi_q
-    A[:, range(nq, nq + m), range(nq, nq + m)] = free
+    A[:, d[nq:], d[nq:]] = free
     rhs = np.concatenate([Qf, gamma], axis=1)
     sol = np.linalg.solve(A, rhs[..., None])[..., 0]
     return sol[:, :nq], sol[:, nq:], Phi_q
@@ -57,8 +57,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     P = np.array([params[c] for c in config]).reshape(n, -1)
     if n:
         a, lam, Phi_q = batch_kkt(model, t, q, v, P)
-        c, cd, cdd, pts = (np.asarray(x) for x in model.post_fn.map(n)(q.T, v.T, a.T, t[None, :]))
-        phi_m = model.phi_fn.map(n)(q.T, t[None, :], P.T)
+        c, cd, cdd, pts = (np.asarray(x) for x in
+                           model.mapped("post_fn", n)(q.T, v.T, a.T, t))
+        phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
         phi = np.asarray(phi_m[0]).T
         hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).T
     else:
@@ -69,7 +70,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         c = cd = cdd = np.zeros((nj, 0))
         pts = np.zeros((2, 0))
         phi = hvel = np.zeros((0, model.m))
-    free = np.array([np.asarray(model.free_fn(p)).ravel() for p in params])
+    free = np.array([model.free(p)[0] for p in params])
     active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
