@@ -1,6 +1,7 @@
 """Command line interface ``cmm-dae``.
 
-Commands: ``run``, ``iterate``, ``compare``, ``events``, ``structure``, ``animate``, ``plot``.
+Commands: ``run``, ``iterate``, ``compare``, ``events``, ``structure``, ``animate``, ``plot``,
+``bench``.
 Bad input gives a clear message on stderr and a non-zero exit code (2: bad input, 3: the
 run failed part-way), never a traceback.
 """
@@ -148,6 +149,18 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench(args: argparse.Namespace) -> int:
+    from .bench import bench_models, table
+
+    paths = [Path(m) for m in args.models] or sorted(
+        (Path(__file__).resolve().parent.parent / "models").glob("*.toml"))
+    if not paths:
+        raise CmmError("no model files given and none found in models/")
+    print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,
+                             repeat=args.repeat)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
                                  "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
@@ -205,6 +218,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="directory for the PNGs")
     p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     p.set_defaults(func=_plot)
+    bn = sub.add_parser("bench", help="benchmark models: IDA vs the iterative algorithm")
+    bn.add_argument("models", nargs="*", help="model files (default: every shipped model)")
+    bn.add_argument("--t-end", type=float, default=10.0, help="simulated time, s (10)")
+    bn.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
+    bn.add_argument("--dt", type=float, default=0.01, help="iterative step, s (0.01)")
+    bn.add_argument("--repeat", type=int, default=3, help="warm repeats, best taken (3)")
+    bn.set_defaults(func=_bench)
     return ap
 
 

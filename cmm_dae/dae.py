@@ -255,10 +255,9 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
                 if hs.push(lam, joint) <= 0.0:
                     del hs.locked[joint]
                     continue
-            q = q_on
             del hs.locked[joint]
             out = ev.at_limit(hs, q, v, t, joint, side, opts.v_lock, last_bounce.get(joint))
-            v = out.v
+            q, v = out.q, out.v
             for e in out.jammed:
                 _append_event(events, e, opts, None, t, q, v, hs)
             _append_event(events, out.event, opts, rec, t, q, v, hs)

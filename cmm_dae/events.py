@@ -142,9 +142,11 @@ def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarr
 
 @dataclass
 class LimitOutcome:
-    """What a limit event does: the new velocities, the event record, whether it locked,
+    """What a limit event does: the clamped positions, the new velocities, the event record,
+    whether it locked,
     and the preloaded locks it released first (``jammed``: their release events)."""
 
+    q: np.ndarray
     v: np.ndarray
     event: Event
     locked: bool
@@ -194,13 +196,17 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
              v_lock: float, last_bounce: float | None) -> LimitOutcome:
     """Apply the impact map when ``joint`` reaches its ``side`` limit at time t.
 
-    ``q`` must already lie on the stop. Plastic impact, a rebound slower than ``v_lock`` or
-    a bounce closer than :data:`ZENO_DT` to the previous one locks the joint; a lock whose
+    ``q`` is put exactly on the stop here (after any jammed lock is freed, so that the
+    constraint set is consistent). Plastic impact, a rebound slower than ``v_lock`` or a
+    bounce closer than :data:`ZENO_DT` to the previous one locks the joint; a lock whose
     force is already of the wrong sign releases at once (two events).
     """
     model = hs.model
     k = model.jidx[joint]
     jammed = release_jammed(hs, q, v, t, joint, side, hs.force_held)
+    hs.locked[joint] = side
+    q = project_positions(model, q, t, hs.p)  # clamp onto the stop
+    del hs.locked[joint]
     before = hs.current()
     _, cd_minus, _ = model.coord(q, v)
     cdm = float(np.asarray(cd_minus).ravel()[k])
@@ -225,7 +231,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         del hs.locked[joint]
     after = hs.current()
     ev = Event(t, kind, joint, side, before, after, cdm, cdp, impulses, lost)
-    out = LimitOutcome(v_plus, ev, not bounce, jammed=jammed)
+    out = LimitOutcome(q, v_plus, ev, not bounce, jammed=jammed)
     if not bounce:
         _, lam, _ = model.kkt(q, v_plus, t, hs.p)
         if hs.push(lam, joint) < 0.0:

@@ -221,11 +221,8 @@ def _switch(model: Model, hs: ev.HybridState, q: np.ndarray, v: np.ndarray, t: f
             # round-off leaves a just-released joint a hair beyond its stop: not a crossing
             if not (beyond > 1e-12 * (1.0 + abs(L)) and toward):
                 continue
-            hs.locked[joint] = side
-            q = ev.project_positions(model, q, t, hs.p)  # clamp onto the stop
-            del hs.locked[joint]
-            out = ev.at_limit(hs, q, v, t, joint, side, v_lock, None)
-            v = out.v
+            out = ev.at_limit(hs, q, v, t, joint, side, v_lock, None)  # clamps, impact map
+            q, v = out.q, out.v
             events.extend(out.jammed)
             events.append(out.event)
             if out.released_at_once:
