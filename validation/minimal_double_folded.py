@@ -4,7 +4,7 @@ scipy's solve_ivp (DOP853) with events: the alternative a user would pick.
 Its own derivation, sharing nothing with cmm_dae but the parameters of
 models/double_folded.toml (read through cd.load). Coordinates: the crank angle theta1(t) is
 prescribed; the slider position x is the one free coordinate while E is open. The loop
-B + L2 e(theta2) + L3 e(theta3) = D = (x, yD) gives theta2, theta3 by a circle intersection,
+B + L2 e(theta2) + L3 e(theta3) = D = (x, y_d) gives theta2, theta3 by a circle intersection,
 their rates and accelerations by 2x2 linear solves. Kane's equation in x gives x''; Kane's
 equation in theta1 gives the driving torque; with E on its stop (x fixed, 0 DOF) the
 x-equation gives the stop force, whose sign change (found by brentq) releases it.
@@ -32,7 +32,7 @@ class Params:
     L1: float
     L2: float
     L3: float
-    yD: float
+    y_d: float
     m: tuple  # crank, coupler, link3, slider
     J: tuple  # centroidal
     g: float
@@ -54,7 +54,7 @@ def params_from(mech: cd.Mechanism) -> Params:
     return Params(
         L1=b["crank"].points["B"][0], L2=b["coupler"].points["C"][0],
         L3=b["link3"].points["D"][0],
-        yD=mech.ground["rail"][1] + b["slider"].points["D"][1],
+        y_d=mech.ground["rail"][1] + b["slider"].points["D"][1],
         m=tuple(b[n].mass for n in ("crank", "coupler", "link3", "slider")),
         J=tuple(b[n].inertia for n in ("crank", "coupler", "link3", "slider")),
         g=-mech.gravity[1], c1=b["crank"].centroid[0], c2=b["coupler"].centroid[0],
@@ -73,13 +73,13 @@ class Minimal:
         """theta2, theta3 of the branch the mechanism starts in (C above the line B-D)."""
         p = self.p
         Bx, By = p.L1 * math.cos(th1), p.L1 * math.sin(th1)
-        dx, dy = x - Bx, p.yD - By
+        dx, dy = x - Bx, p.y_d - By
         L = math.hypot(dx, dy)
         a = (p.L2**2 - p.L3**2 + L * L) / (2 * L)
         h = math.sqrt(max(p.L2**2 - a * a, 0.0))
         ex, ey = dx / L, dy / L
         Cx, Cy = Bx + a * ex - h * ey, By + a * ey + h * ex
-        return math.atan2(Cy - By, Cx - Bx), math.atan2(p.yD - Cy, x - Cx)
+        return math.atan2(Cy - By, Cx - Bx), math.atan2(p.y_d - Cy, x - Cx)
 
     def kin(self, t: float, x: float, xd: float):
         """Positions, and accelerations as (constant part, coefficient of x'') of the
