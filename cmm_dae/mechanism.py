@@ -207,18 +207,32 @@ class Mechanism:
     check: InitVar[bool] = True
 
     def __post_init__(self, check: bool) -> None:
-        def as_map(items, key):
-            if isinstance(items, dict | MappingProxyType):
-                return _frozen(items)
-            return _frozen({getattr(x, key): x for x in items})
+        dup: list[Problem] = []
 
-        object.__setattr__(self, "bodies", as_map(self.bodies, "name"))
-        object.__setattr__(self, "joints", as_map(self.joints, "name"))
-        object.__setattr__(self, "drivers", as_map(self.drivers, "joint"))
+        def as_map(items, key, table):
+            if isinstance(items, dict | MappingProxyType):
+                for k, x in items.items():
+                    if getattr(x, key) != k:
+                        dup.append(Problem(f"{table}.{k}", key, f"the entry is keyed '{k}' "
+                                           f"but its {key} is '{getattr(x, key)}'"))
+                return _frozen(items)
+            out: dict = {}
+            for x in items:
+                k = getattr(x, key)
+                if k in out:
+                    dup.append(Problem(f"{table}.{k}", "", f"two entries named '{k}'"
+                                       + (" (one driver per joint)" if table == "drivers"
+                                          else "")))
+                out[k] = x
+            return _frozen(out)
+
+        object.__setattr__(self, "bodies", as_map(self.bodies, "name", "bodies"))
+        object.__setattr__(self, "joints", as_map(self.joints, "name", "joints"))
+        object.__setattr__(self, "drivers", as_map(self.drivers, "joint", "drivers"))
         object.__setattr__(self, "ground", _frozen(
             {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
         object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
-        problems = validate(self) if check else []
+        problems = dup + validate(self) if check else []
         if problems:
             raise ModelError(problems, self.source)
 

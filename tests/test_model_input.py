@@ -175,3 +175,72 @@ def test_python_built_mechanism_runs():
     period = np.mean(np.diff(crossings))
     ref = 2 * np.pi * np.sqrt((J + m * (L / 2) ** 2) / (m * 9.81 * L / 2))
     assert period == pytest.approx(ref, rel=1e-8)  # amplitude 1e-4 rad: correction ~6e-10
+
+
+MORE_CASES = [
+    ("[joints.E]", "[joints.E]\nlimits = { upper = 0.3 }\nrestitution = 1.5",
+     r"\[joints\.E\] restitution: expected a number in \[0, 1\], got 1\.5"),
+    ("[joints.E]", "[joints.E]\nlimits = { lowr = 0.1 }",
+     r"\[joints\.E\.limits\] lowr: unknown key; did you mean 'lower'"),
+    ("[joints.B]", "[joints.B]\nspring = { rest = 0.1 }",
+     r"\[joints\.B\.spring\] stiffness: missing"),
+    ("[bodies.rod]", "[bodys.extra]\nmass = 1.0\n[bodies.rod]",
+     r"\[top level\] bodys: unknown key; did you mean 'bodies'"),
+    ("[joints.A]\ntype", "[joints.A]\nlimits = { lower = 0.0 }\ntype",
+     r"\[drivers\.A\]: joint 'A' has limits: a driven joint cannot be metamorphic"),
+    ("[drivers.A]", "[initial]\njoints = { E = \"far\" }\n[drivers.A]",
+     r"\[initial\] joints\.E: expected a number, got str"),
+    ("points = { C = [0.0, 0.0] }", "points = { C = [0.0, \"x\"] }",
+     r"\[bodies\.slider\.points\] C\[1\]: expected a number, got str"),
+    ("guess = [0.24, 0.0, 0.0]", "guess = [0.24, 0.0]",
+     r"\[bodies\.slider\] guess: expected a list of 3 numbers"),
+    ("inertia = 1.0e-4\n", "inertia = -1.0e-4\n",
+     r"\[bodies\.slider\] inertia: expected a positive centroidal inertia"),
+    ('motion = "constant_speed"\ninitial', 'motion = "table"\ntimes = [0.0, 1.0, 0.5]\n'
+     'values = [0.5, 1.0, 2.0]\n#', r"\[drivers\.A\] times: expected strictly increasing"),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "pattern"), MORE_CASES)
+def test_more_bad_model_messages(tmp_path, old, new, pattern):
+    assert old in BASE, old
+    with pytest.raises(cd.ModelError, match=pattern):
+        load_text(tmp_path, BASE.replace(old, new, 1))
+
+
+def test_initial_coordinate_outside_limits(tmp_path):
+    text = BASE.replace('axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nlimits = { upper = 0.2 }')
+    text = text.replace("[drivers.A]", "[initial]\njoints = { E = 0.25 }\n[drivers.A]")
+    with pytest.raises(cd.ModelError, match=r"\[initial\] joints\.E: 0\.25 lies outside the "
+                       r"limits \[None, 0\.2\] of joint 'E'"):
+        load_text(tmp_path, text)
+
+
+def _pendulum_parts():
+    body = cd.Body("rod", 1.0, 0.01, (0.1, 0.0), {"O": (0.0, 0.0)})
+    joint = cd.Joint("O", "revolute", "ground.O", "rod.O")
+    return body, joint
+
+
+def test_duplicate_names_in_python():
+    body, joint = _pendulum_parts()
+    with pytest.raises(cd.ModelError, match=r"\[bodies\.rod\]: two entries named 'rod'"):
+        cd.Mechanism("m", bodies=[body, body], joints=[joint], ground={"O": (0, 0)})
+    with pytest.raises(cd.ModelError, match=r"\[drivers\.O\]: two entries named 'O' \(one "
+                       r"driver per joint\)"):
+        cd.Mechanism("m", bodies=[body], joints=[joint], ground={"O": (0, 0)},
+                     drivers=[cd.Driver("O", speed=1.0), cd.Driver("O", speed=2.0)])
+
+
+def test_two_drivers_one_joint_in_toml_is_a_syntax_error(tmp_path):
+    text = BASE + '\n[drivers.A]\nmotion = "constant_speed"\ninitial = 0.5\nspeed = 1.0\n'
+    with pytest.raises(cd.ModelError,
+                       match=r"TOML syntax error: Cannot declare \('drivers', 'A'\) twice"):
+        load_text(tmp_path, text)
+
+
+def test_nothing_is_evaluated(tmp_path):
+    """An expression where a number belongs is a type error, never Python code."""
+    text = BASE.replace("speed = 6.283185307179586", 'speed = "__import__(\'os\').getcwd()"')
+    with pytest.raises(cd.ModelError, match=r"\[drivers\.A\] speed: expected a number, got str"):
+        load_text(tmp_path, text)
