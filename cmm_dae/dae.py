@@ -398,7 +398,7 @@ class _Segment:
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
         rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], self.hs.current())
         if r.status < 0:
-            raise SolverError(self._failure_message(r, float(T[-1])))
+            raise SolverError(self._failure_message(r, float(T[-1]), Y[-1, :nq]))
         if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
             info = np.asarray(r.i_events)[-1]
             hit = int(np.flatnonzero(info[1:] != 0)[0])
@@ -410,8 +410,14 @@ class _Segment:
         stats.nfev += int(r.nfev)
         stats.njev += int(r.njev)
 
-    def _failure_message(self, r, tt: float) -> str:
-        return (f"IDA failed at t = {tt:.9g} s in configuration "
-                f"'{self.hs.configurations[self.hs.current()].label}': {r.message} "
-                f"(status {r.status}). A dead point or a lock-up of the mechanism near this "
-                "time makes the constraint Jacobian singular.")
+    def _failure_message(self, r, tt: float, q: np.ndarray) -> str:
+        cfg = self.hs.configurations[self.hs.current()].label
+        labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1e-4)
+        if labels:
+            what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
+                    f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
+                    "cannot follow its drivers through this position")
+        else:
+            what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
+                    "tolerances may be too tight or the forces too stiff)")
+        return f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})"

@@ -13,7 +13,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .equations import Model
+from .errors import SolverError
 from .result import Configuration, Event
+
+
+class LockUpError(SolverError):
+    """A new lock leaves the drivers no freedom: the mechanism locks up."""
 
 #: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s.
 ZENO_DT = 1e-9
@@ -165,6 +170,30 @@ def _over_constrained(hs: HybridState, q: np.ndarray, t: float) -> bool:
     return rank < J.shape[0]
 
 
+def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                   tol: float = 1e-6) -> tuple[list[str], float]:
+    """Constraint rows that (nearly) depend on each other at q: the joints, drivers and
+    locks of a dead point or a lock-up. Returns (labels, smallest/largest singular value);
+    no labels when the rows are independent."""
+    free = model.free(p)[0]
+    act = np.flatnonzero(free == 0.0)
+    J = model.phi(q, t, p)[1][act]
+    U, s, _ = np.linalg.svd(J)
+    if J.shape[0] > J.shape[1]:
+        s = np.concatenate([s, np.zeros(J.shape[0] - J.shape[1])])
+    ratio = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
+    if ratio > tol:
+        return [], ratio
+    w = np.abs(U[:, -1])
+    labels = []
+    for i in np.flatnonzero(w > 0.05 * w.max()):
+        r = model.rows[act[i]]
+        lab = f"{r.kind} {r.name}" if r.kind != "joint" else f"joint {r.name}"
+        if lab not in labels:
+            labels.append(lab)
+    return labels, ratio
+
+
 def release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
                    side: str, force_held: dict[str, str]) -> list[Event]:
     """Before ``joint`` locks: if the lock would over-constrain (jam) the mechanism, the
@@ -205,6 +234,13 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     k = model.jidx[joint]
     jammed = release_jammed(hs, q, v, t, joint, side, hs.force_held)
     hs.locked[joint] = side
+    if _over_constrained(hs, q, t):
+        labels, _ = dependent_rows(model, q, t, hs.p, tol=1e-9)
+        del hs.locked[joint]
+        raise LockUpError(
+            f"lock-up at t = {t:.9g} s: with joint {joint} locked on its {side} stop the "
+            f"constraints of {', '.join(labels)} cannot all hold; the mechanism has no freedom "
+            "left for its drivers (the stop would have to stop a driver)")
     q = project_positions(model, q, t, hs.p)  # clamp onto the stop
     del hs.locked[joint]
     before = hs.current()
