@@ -316,6 +316,7 @@ class _Segment:
         self.n_steps = 0
         self.t_last = -math.inf
         self.outputs: set[float] = set()
+        self.interrupted = False
 
     def resfn(self, t, y, yp, res):
         self.t_arr[0] = t
@@ -362,19 +363,36 @@ class _Segment:
         q = ev.project_positions(model, q, t0, self.p)
         v = ev.project_velocities(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
+        self.ratio0 = ev.dependent_rows(model, q, t0, self.p, tol=1.0)[1]
         y0 = np.concatenate([q, v, lam, np.zeros(model.m)])
         yp0 = np.concatenate([v, a, np.zeros(2 * model.m)])
         ne = 1 + len(self.events)
 
         # scikit-sundae keeps its event history on the function object: a fresh one per
-        # segment, so no event of an earlier segment is seen again.
+        # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
+        # callback would abort IDA and lose the segment's outputs: it is caught here and
+        # turned into a root of the always-positive first event function instead, so IDA
+        # returns what it has and the run stops with everything computed so far.
         def eventsfn(t, y, yp, out):
-            self.eventsfn(t, y, yp, out)
+            try:
+                self.eventsfn(t, y, yp, out)
+            except KeyboardInterrupt:
+                self.interrupted = True
+            if self.interrupted:
+                out[:] = 1.0
+                out[0] = -1.0
+
+        def resfn(t, y, yp, res):
+            try:
+                self.resfn(t, y, yp, res)
+            except KeyboardInterrupt:
+                self.interrupted = True
+                self.resfn(t, y, yp, res)
 
         eventsfn.direction = [0] + [-1] * len(self.events)
         eventsfn.terminal = [True] * ne
         solver = sun.ida.IDA(
-            self.resfn, jacfn=self.jacfn, eventsfn=eventsfn, num_events=ne,
+            resfn, jacfn=self.jacfn, eventsfn=eventsfn, num_events=ne,
             rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
             first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)))
         outs = _output_times(opts, t0)
@@ -399,6 +417,8 @@ class _Segment:
         rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], self.hs.current())
         if r.status < 0:
             raise SolverError(self._failure_message(r, float(T[-1]), Y[-1, :nq]))
+        if r.status == 2 and self.interrupted:
+            raise KeyboardInterrupt
         if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
             info = np.asarray(r.i_events)[-1]
             hit = int(np.flatnonzero(info[1:] != 0)[0])
@@ -412,8 +432,11 @@ class _Segment:
 
     def _failure_message(self, r, tt: float, q: np.ndarray) -> str:
         cfg = self.hs.configurations[self.hs.current()].label
-        labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1e-4)
-        if labels:
+        # the constraint rows' conditioning at the failure against the segment's start: a
+        # dead point shows as a collapse of the smallest singular value (units mix, so
+        # only the ratio of the two says anything)
+        labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
+        if ratio < 0.2 * self.ratio0:
             what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")

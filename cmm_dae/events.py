@@ -237,10 +237,11 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     if _over_constrained(hs, q, t):
         labels, _ = dependent_rows(model, q, t, hs.p, tol=1e-9)
         del hs.locked[joint]
+        drivers = ", ".join(f"driver {d}" for d in model.driver_names) or "no driver"
         raise LockUpError(
             f"lock-up at t = {t:.9g} s: with joint {joint} locked on its {side} stop the "
             f"constraints of {', '.join(labels)} cannot all hold; the mechanism has no freedom "
-            "left for its drivers (the stop would have to stop a driver)")
+            f"left for its drivers ({drivers}): the stop would have to stop a driver")
     q = project_positions(model, q, t, hs.p)  # clamp onto the stop
     del hs.locked[joint]
     before = hs.current()

@@ -21,7 +21,6 @@ import time
 import numpy as np
 
 from . import events as ev
-from .assembly import check_rank
 from .dae import start_state
 from .equations import Model
 from .errors import CmmError, ModelError, Problem, SolverError
@@ -90,11 +89,12 @@ class _Stepper:
         r = np.concatenate([np.asarray(phi).ravel()[self.act],
                             np.asarray(c).ravel()[self.kidx] - targets])
         if np.max(np.abs(r), initial=0.0) > 1e-9:
-            J = np.vstack([np.asarray(Phi_q)[self.act], np.asarray(c_q)[self.kidx]])
-            check_rank(model, J, self.act, self.coords, t)
-            raise SolverError(f"the position equations do not converge at t = {t:.6g} s "
-                              f"(residual {np.max(np.abs(r)):.3g}): the mechanism cannot "
-                              "follow its driver here (a dead point or a lock-up)")
+            labels, ratio = ev.dependent_rows(model, q0, t, p, tol=1.0)
+            raise SolverError(f"dead point near t = {t:.6g} s: the position equations do not "
+                              f"converge (residual {np.max(np.abs(r)):.3g}); the constraints "
+                              f"of {', '.join(labels)} are nearly dependent at the last "
+                              f"position (singular-value ratio {ratio:.1e}): the mechanism "
+                              "cannot follow its driver here")
         return q
 
     def velocities(self, q: np.ndarray, t: float, rates: np.ndarray) -> np.ndarray:
@@ -174,7 +174,12 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
             t = t_new
             stats.steps += 1
             pre = (t, q, v, hs.current())
-            changed = _switch(model, hs, q, v, t, v_lock, events)
+            try:
+                changed = _switch(model, hs, q, v, t, v_lock, events)
+            except CmmError:
+                for lst, x in zip((T, Q, V, C), pre, strict=True):  # keep the last state
+                    lst.append(x)
+                raise
             if changed:
                 for lst, x in zip((T, Q, V, C), pre, strict=True):  # the pre-event sample
                     lst.append(x)
