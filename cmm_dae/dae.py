@@ -107,6 +107,18 @@ def start_state(model: Model, hs: ev.HybridState, t0: float = 0.0
         rates = dict(ini.velocities)
     q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
     v = assemble_velocities(model, q, t0, hs.p, rates)
+    c0 = model.cvel(q, v)[0]
+    beyond = []
+    for name in model.locks:
+        lim = mech.joints[name].limits
+        val = float(c0[model.jidx[name]])
+        tol = 1e-12 * max(1.0, abs(val))
+        if (lim.lower is not None and val < lim.lower - tol) or (
+                lim.upper is not None and val > lim.upper + tol):
+            beyond.append(Problem("initial", "joints", f"joint '{name}' assembles at {val:.9g}, "
+                                  f"outside its limits [{lim.lower}, {lim.upper}]"))
+    if beyond:
+        raise ModelError(beyond, mech.source)
     events: list[Event] = []
     for name, side in on_stop.items():
         if rates.get(name, 0.0) != 0.0:
@@ -123,7 +135,7 @@ def start_state(model: Model, hs: ev.HybridState, t0: float = 0.0
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,
             output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
-            max_steps: int = 50000, throw: bool = True, model: Model | None = None) -> Result:
+            max_steps: int = 500_000, throw: bool = True, model: Model | None = None) -> Result:
     """Simulate a mechanism with IDA from t = 0 to ``t_end``.
 
     Parameters
@@ -142,7 +154,8 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: f
     v_lock : float
         A rebound slower than this (rad/s or m/s) locks the joint.
     max_steps : int
-        Most IDA steps between two outputs.
+        Most IDA steps in the whole run: beyond it the run stops with a "stalled"
+        :class:`SolverError` (and its partial Result) instead of crawling on.
     throw : bool
         Raise :class:`SolverError` on failure (True) or return the partial Result with
         ``status`` saying what happened (False).
@@ -232,6 +245,7 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
     stayed: dict[str, float] = {}
     while t < opts.t_end:
         seg = _Segment(model, hs, opts)
+        seg.step_budget = opts.max_steps - stats.steps
         outcome = seg.run(t, q, v, rec, first_step, stats)
         stats.segments += 1
         if outcome is None:
@@ -297,6 +311,10 @@ def _append_event(events: list[Event], e: Event, opts: Options, rec: _Recorder, 
                           f"(last: {e.kind} of joint {e.joint})")
 
 
+class _StalledError(Exception):
+    """Raised inside the root function when the run's step budget is spent."""
+
+
 class _Segment:
     """One IDA integration in one configuration, until t_end or the first event."""
 
@@ -317,6 +335,8 @@ class _Segment:
         self.t_last = -math.inf
         self.outputs: set[float] = set()
         self.interrupted = False
+        self.stalled = False
+        self.step_budget = opts.max_steps
 
     def resfn(self, t, y, yp, res):
         self.t_arr[0] = t
@@ -341,18 +361,20 @@ class _Segment:
         if t > self.t_last and t not in self.outputs:
             self.t_last = t
             self.n_steps += 1
+            if self.n_steps > self.step_budget:
+                raise _StalledError
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
         if not self.events:
             return
         model = self.model
         nq = model.nq
-        q = y[:nq]
+        q, v = y[:nq], y[nq:2 * nq]
         if self.has_push:  # lock forces by a KKT solve at (q, v, t), never IDA's lambda
-            c, Phi_q, Qf, gamma = model.evparts(q, y[nq:2 * nq], t, self.p)
+            c, cd, Phi_q, Qf, gamma = model.evparts(q, v, t, self.p)
             _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, self.p)
         else:
-            c, lam = model.cpos(q)[0], None
-        out[1:] = ev.event_values(self.hs, c, lam, self.events)
+            (c, cd), lam = model.cvel(q, v), None
+        out[1:] = ev.event_values(self.hs, c, lam, self.events, cd)
 
     def run(self, t0: float, q: np.ndarray, v: np.ndarray, rec: _Recorder, first_step: float,
             stats: Stats):
@@ -378,6 +400,8 @@ class _Segment:
                 self.eventsfn(t, y, yp, out)
             except KeyboardInterrupt:
                 self.interrupted = True
+            except _StalledError:
+                self.stalled = self.interrupted = True
             if self.interrupted:
                 out[:] = 1.0
                 out[0] = -1.0
@@ -417,6 +441,11 @@ class _Segment:
         rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], self.hs.current())
         if r.status < 0:
             raise SolverError(self._failure_message(r, float(T[-1]), Y[-1, :nq]))
+        if r.status == 2 and self.stalled:
+            raise SolverError(
+                f"stalled at t = {float(T[-1]):.9g} s: more than {opts.max_steps} IDA steps "
+                "in this run (tiny steps: a grazing contact, a near-singular position or "
+                "forces too stiff for the tolerances); raise max_steps to go on")
         if r.status == 2 and self.interrupted:
             raise KeyboardInterrupt
         if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment

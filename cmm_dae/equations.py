@@ -262,9 +262,9 @@ class Model:
         self.kkt_parts = Fast(self.kkt_fn)
         self.post1 = Fast(self.post_fn)
         self.free = Fast(self.free_fn)
-        self.cpos = Fast(ca.Function("cpos", [q], [dn(c)]))
+        self.cvel = Fast(ca.Function("cvel", [q, v], [dn(c), dn(cdot)]))
         self.evparts = Fast(ca.Function("evparts", [q, v, t, p],
-                                        [dn(c), dn(Phi_q), dn(Qf), dn(gamma)]))
+                                        [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
         self._kkt_templates: dict[bytes, np.ndarray] = {}
         self._maps: dict[tuple[str, int], Fast] = {}
 

@@ -68,15 +68,22 @@ class HybridState:
 
 
 def event_values(hs: HybridState, c: np.ndarray, lam: np.ndarray | None,
-                 events: list[tuple[str, str, str]] | None = None) -> np.ndarray:
+                 events: list[tuple[str, str, str]] | None = None,
+                 cdot: np.ndarray | None = None) -> np.ndarray:
     """Values of the event functions of the current configuration (see :func:`event_list`;
-    pass that list as ``events`` to save building it at every call)."""
+    pass that list as ``events`` to save building it at every call).
+
+    With the coordinate rates ``cdot`` a gap is armed only while its joint approaches the
+    stop (+1 while it moves away): just after a release or a rejected root the joint leaves
+    at almost zero speed and round-off in the gap would otherwise read as arrivals, one
+    restart after the other. The jump to +1 is never a downward crossing."""
     out = []
     for joint, side, kind in events if events is not None else event_list(hs):
         if kind == "gap":
             L = hs.limit_value(joint, side)
             k = hs.model.jidx[joint]
-            out.append(c[k] - L if side == "lower" else L - c[k])
+            away = cdot is not None and (cdot[k] > 0.0 if side == "lower" else cdot[k] < 0.0)
+            out.append(1.0 if away else (c[k] - L if side == "lower" else L - c[k]))
         else:
             out.append(hs.push(lam, joint))
     return np.array(out)

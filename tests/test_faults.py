@@ -18,7 +18,7 @@ def stopped_slider_crank(tmp_path: Path) -> cd.Mechanism:
     """A driven slider-crank whose slider meets a plastic stop: with the slider held, the
     driven crank cannot move on (no spring joint in the loop): a lock-up."""
     text = (MODELS / "slider_crank.toml").read_text().replace(
-        'axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nlimits = { upper = 0.24 }')
+        'axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nlimits = { upper = 0.245 }')
     path = tmp_path / "lockup.toml"
     path.write_text(text)
     return cd.load(path)
@@ -34,10 +34,10 @@ def test_lock_up(tmp_path, method):
         run()
     part = info.value.result
     # the slider (centred crank 0.05, rod 0.2, starting at 0.5 rad and 1 rev/s) reaches
-    # 0.24 m at the first crank angle where 0.05 cos th + sqrt(0.2^2 - 0.05^2 sin^2 th) = 0.24
+    # 0.245 m at the first crank angle where 0.05 cos th + sqrt(0.2^2 - 0.05^2 sin^2 th) = 0.245
     th = np.linspace(0.5, 2 * np.pi, 200001)
     x = 0.05 * np.cos(th) + np.sqrt(0.04 - 0.0025 * np.sin(th) ** 2)
-    t_hit = (th[np.flatnonzero((x[:-1] < 0.24) & (x[1:] >= 0.24))[0]] - 0.5) / (2 * np.pi)
+    t_hit = (th[np.flatnonzero((x[:-1] < 0.245) & (x[1:] >= 0.245))[0]] - 0.5) / (2 * np.pi)
     if method == "ida":
         assert abs(part.t[-1] - t_hit) < 1e-4
     else:  # the iterative algorithm switches at the end of the step that crossed

@@ -244,3 +244,11 @@ def test_nothing_is_evaluated(tmp_path):
     text = BASE.replace("speed = 6.283185307179586", 'speed = "__import__(\'os\').getcwd()"')
     with pytest.raises(cd.ModelError, match=r"\[drivers\.A\] speed: expected a number, got str"):
         load_text(tmp_path, text)
+
+
+def test_assembled_start_beyond_a_limit(tmp_path):
+    """A coordinate not named in [initial] but assembled beyond its stop is reported."""
+    text = BASE.replace('axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nlimits = { upper = 0.2 }')
+    with pytest.raises(cd.ModelError, match=r"\[initial\] joints: joint 'E' assembles at "
+                       r"0\.24[0-9]*, outside its limits \[None, 0\.2\]"):
+        cd.run_dae(load_text(tmp_path, text), 0.1)
