@@ -17,10 +17,12 @@ from .report import Comparison, compare
 from .result import Configuration, Event, Result, Stats, load_result
 from .structure import Group, Structure, labeller, structure
 from .studies import convergence, work_precision
+from .sweep import SweepTable, sweep, with_params
 
 __all__ = [
     "AssemblyError", "Body", "CmmError", "Comparison", "Configuration", "compare",
-    "convergence", "work_precision", "Damper", "Driver", "Event",
+    "convergence", "work_precision", "sweep", "SweepTable", "with_params", "Damper", "Driver",
+    "Event",
     "Initial", "Joint", "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result",
     "SolverError", "Spring", "Stats", "Group", "Structure", "from_dict", "labeller", "load",
     "load_result", "run_dae", "run_iterative", "structure",

@@ -161,6 +161,28 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import parse_range, sweep
+
+    mech = _load(args.model)
+    params = dict(parse_range(p) for p in args.param)
+    if not params:
+        raise CmmError("give at least one --param PATH=A:B:N")
+    client = None
+    if args.scheduler:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise CmmError("--scheduler needs dask.distributed: pip install "
+                           "'cmm_dae[scale]'") from None
+        client = Client(args.scheduler)
+    table = sweep(mech, params, t_end=args.t_end, client=client, workers=args.workers,
+                  checkpoint=args.out, progress=True, rtol=args.rtol)
+    ok = sum(r["status"] == "success" for r in table.rows)
+    print(f"{len(table)} runs ({ok} successful) -> {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
                                  "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
@@ -218,6 +240,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="directory for the PNGs")
     p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     p.set_defaults(func=_plot)
+    sw = sub.add_parser("sweep", help="parameter sweep (local processes or a Dask cluster)")
+    sw.add_argument("model", help="mechanism TOML file")
+    sw.add_argument("--param", action="append", default=[], metavar="PATH=A:B:N",
+                    help="e.g. joints.D.spring.stiffness=0.5:3:20 (repeat for a grid)")
+    sw.add_argument("--out", required=True, help="CSV written as runs finish (and resumed)")
+    sw.add_argument("--t-end", type=float, default=10.0, help="end time, s (10)")
+    sw.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
+    sw.add_argument("--workers", type=int, default=None, help="local processes (all cores)")
+    sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
+    sw.set_defaults(func=_sweep)
+
     bn = sub.add_parser("bench", help="benchmark models: IDA vs the iterative algorithm")
     bn.add_argument("models", nargs="*", help="model files (default: every shipped model)")
     bn.add_argument("--t-end", type=float, default=10.0, help="simulated time, s (10)")

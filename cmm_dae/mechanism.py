@@ -56,6 +56,10 @@ class Body:
             {k: (float(v[0]), float(v[1])) for k, v in dict(self.points).items()}))
         object.__setattr__(self, "centroid", (float(self.centroid[0]), float(self.centroid[1])))
 
+    def __reduce__(self):  # MappingProxyType does not pickle: rebuild from plain dicts
+        return (Body, (self.name, self.mass, self.inertia, self.centroid, dict(self.points),
+                       self.guess))
+
     @classmethod
     def with_inertia_about(cls, name: str, mass: float, inertia: float, about: Vec2,
                            centroid: Vec2, **kw) -> Body:
@@ -187,6 +191,9 @@ class Initial:
         object.__setattr__(self, "joints", _frozen(self.joints))
         object.__setattr__(self, "velocities", _frozen(self.velocities))
 
+    def __reduce__(self):
+        return (Initial, (dict(self.joints), dict(self.velocities)))
+
 
 @dataclass(frozen=True)
 class Mechanism:
@@ -236,6 +243,10 @@ class Mechanism:
         if problems:
             raise ModelError(problems, self.source)
 
+    def __reduce__(self):
+        return (_rebuild, (self.name, dict(self.bodies), dict(self.joints), dict(self.ground),
+                           dict(self.drivers), self.initial, self.gravity, self.source))
+
     @property
     def limited_joints(self) -> list[str]:
         """Names of the joints with limits (the metamorphic joints), in file order."""
@@ -247,6 +258,12 @@ class Mechanism:
         if body == GROUND:
             return self.ground[pt]
         return self.bodies[body].points[pt]
+
+
+def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source) -> Mechanism:
+    """Unpickling: the description was validated when it was first built."""
+    return Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
+                     initial=initial, gravity=gravity, source=source, check=False)
 
 
 def _finite(x) -> bool:

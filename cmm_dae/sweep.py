@@ -1,0 +1,338 @@
+"""Parameter sweeps: many variants of one mechanism, on a local process pool by default or
+on a Dask cluster when the caller passes a ``dask.distributed.Client``.
+
+Rows come back ordered like the input cases; a variant that cannot assemble or fails
+part-way is a row with its status and message, every other row is complete. Rows stream
+to a checkpoint CSV as they finish, and a rerun with the same file skips the rows done.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import CmmError, ModelError, Problem
+from .mechanism import Damper, Limits, Mechanism, Spring
+from .result import Result
+
+Metric = Callable[[Result], Mapping[str, float]]
+
+_SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
+
+
+def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
+    """A copy of ``mech`` with dotted-path values replaced, validated again.
+
+    Paths: ``bodies.NAME.mass|inertia``, ``joints.NAME.restitution|angle``,
+    ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
+    ``joints.NAME.limits.lower|upper``, ``drivers.JOINT.speed|initial|amplitude|...``,
+    ``initial.joints.NAME``, ``initial.velocities.NAME``, ``gravity.x|y``.
+    """
+    bodies, joints = dict(mech.bodies), dict(mech.joints)
+    drivers = dict(mech.drivers)
+    ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
+    gravity = list(mech.gravity)
+    problems = []
+    for path, value in values.items():
+        parts = path.split(".")
+        try:
+            value = float(value)
+            if parts[0] in ("bodies", "joints", "drivers") and len(parts) in (3, 4):
+                table = {"bodies": bodies, "joints": joints, "drivers": drivers}[parts[0]]
+                obj = table[parts[1]]
+                if len(parts) == 3:
+                    getattr(obj, parts[2])  # unknown attribute -> AttributeError
+                    table[parts[1]] = replace(obj, **{parts[2]: value})
+                else:
+                    sub = getattr(obj, parts[2])
+                    if sub is None:
+                        sub = _SUB[parts[2]](**({"stiffness": 0.0} if parts[2] == "spring"
+                                                else {"damping": 0.0}
+                                                if parts[2] == "damper" else {}))
+                    getattr(sub, parts[3])
+                    table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]:
+                                                                                value})})
+            elif parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints",
+                                                                              "velocities"):
+                (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
+            elif parts[0] == "gravity" and len(parts) == 2 and parts[1] in ("x", "y"):
+                gravity["xy".index(parts[1])] = value
+            else:
+                raise KeyError(path)
+        except (KeyError, AttributeError, TypeError, ValueError):
+            problems.append(Problem("sweep", path, f"not a parameter of the mechanism (or "
+                                    f"not a number: {value!r}); e.g. joints.D.spring.stiffness,"
+                                    " bodies.slider.mass, joints.E.limits.upper"))
+    if problems:
+        raise ModelError(problems, mech.source)
+    from .mechanism import Initial
+
+    return Mechanism(name=mech.name, bodies=bodies, joints=joints, ground=dict(mech.ground),
+                     drivers=drivers, initial=Initial(ini_j, ini_v), gravity=tuple(gravity),
+                     source=mech.source)
+
+
+def cases_from(params: Mapping[str, Iterable[float]] | list[Mapping[str, float]]
+               ) -> list[dict[str, float]]:
+    """A grid (dict of value lists: cartesian product, last key fastest) or explicit cases."""
+    if isinstance(params, Mapping):
+        keys = list(params)
+        return [dict(zip(keys, combo, strict=True))
+                for combo in itertools.product(*(list(params[k]) for k in keys))]
+    return [dict(c) for c in params]
+
+
+def default_metrics(res: Result) -> dict[str, float]:
+    """Switching times per joint and kind (``t_limit_E_1`` = first limit event of E), peak
+    |driving effort| per driver, the largest energy-balance residual."""
+    out: dict[str, float] = {}
+    count: dict[tuple[str, str], int] = {}
+    for e in res.events:
+        k = (e.kind, e.joint)
+        count[k] = count.get(k, 0) + 1
+        out[f"t_{e.kind}_{e.joint}_{count[k]}"] = e.t
+    for d in res.meta["drivers"]:
+        out[f"peak_effort_{d}"] = float(np.max(np.abs(res.driver(d).effort)))
+    out["energy_residual"] = float(np.max(np.abs(res.energy().residual)))
+    return out
+
+
+def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
+             metrics: Metric | None, run_options: dict[str, Any]) -> dict[str, Any]:
+    """One sweep row; never raises for a failing variant (status and message say why)."""
+    from .dae import run_dae
+
+    row: dict[str, Any] = dict(values)
+    t0 = time.perf_counter()
+    try:
+        res = run_dae(with_params(mech, values), t_end, throw=False, **run_options)
+        row.update((metrics or default_metrics)(res))
+        row["status"] = "success" if res.success else "failed"
+        row["message"] = "" if res.success else res.status
+        row["t_reached"] = float(res.t[-1])
+    except CmmError as e:
+        row.update(status="error", message=str(e).replace("\n", " "), t_reached=math.nan)
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+class SweepTable:
+    """Sweep results: one dict per case, in input order; ``columns`` is the union of keys."""
+
+    def __init__(self, rows: list[dict[str, Any]]):
+        self.rows = rows
+
+    @property
+    def columns(self) -> list[str]:
+        cols: list[str] = []
+        for r in self.rows:
+            cols += [k for k in r if k not in cols]
+        return cols
+
+    def column(self, name: str) -> np.ndarray:
+        """One column as an array (NaN where a row has no value)."""
+        return np.array([r.get(name, math.nan) for r in self.rows], dtype=object
+                        if any(isinstance(r.get(name), str) for r in self.rows) else float)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def to_csv(self, path: str | Path) -> Path:
+        path = Path(path)
+        cols = self.columns
+        with path.open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=cols, restval="")
+            w.writeheader()
+            w.writerows(self.rows)
+        return path
+
+
+def _key(values: Mapping[str, Any], names: list[str]) -> tuple:
+    """A case's identity in a checkpoint: its parameter values (NaN where it has none)."""
+    out = []
+    for n in names:
+        v = values.get(n, math.nan)
+        v = float(v) if v not in ("", None) else math.nan
+        out.append("nan" if math.isnan(v) else repr(v))
+    return tuple(out)
+
+
+def _read_checkpoint(path: Path, names: list[str]) -> dict[tuple, dict[str, Any]]:
+    done: dict[tuple, dict[str, Any]] = {}
+    if not path.is_file():
+        return done
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            if row.get("case") is None:
+                continue
+            parsed: dict[str, Any] = {}
+            for k, v in row.items():
+                if k in ("status", "message") or v is None:
+                    parsed[k] = v
+                    continue
+                try:
+                    parsed[k] = float(v) if v != "" else math.nan
+                except ValueError:
+                    parsed[k] = v
+            try:
+                done[_key(parsed, names)] = parsed
+            except (KeyError, ValueError):
+                continue
+    return done
+
+
+class _Checkpoint:
+    """Rows appended to a CSV as they finish (header from the first row's keys + extras)."""
+
+    def __init__(self, path: Path | None):
+        self.path = path
+        self.fields: list[str] | None = None
+
+    def write(self, row: dict[str, Any]) -> None:
+        if self.path is None:
+            return
+        new = not self.path.is_file() or self.path.stat().st_size == 0
+        if self.fields is None:
+            if new:
+                self.fields = list(row)
+            else:
+                with self.path.open(newline="") as f:
+                    self.fields = next(csv.reader(f), list(row))
+        extra = [k for k in row if k not in self.fields]
+        if extra:  # a metric the earlier rows lacked: rewrite the file with wider columns
+            old = list(csv.DictReader(self.path.open(newline=""))) if not new else []
+            self.fields += extra
+            with self.path.open("w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=self.fields, restval="")
+                w.writeheader()
+                w.writerows(old)
+            new = False
+        with self.path.open("a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=self.fields, restval="")
+            if new:
+                w.writeheader()
+            w.writerow(row)
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool):
+        self.total, self.enabled, self.done, self.t0 = total, enabled, 0, time.perf_counter()
+
+    def step(self) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        frac = self.done / max(self.total, 1)
+        bar = "#" * int(30 * frac)
+        rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
+        sys.stderr.write(f"\rsweep [{bar:<30}] {self.done}/{self.total} ({rate:.1f} runs/s)")
+        if self.done == self.total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[str, float]],
+          *, t_end: float, metrics: Metric | None = None, client: Any = None,
+          workers: int | None = None, checkpoint: str | Path | None = None,
+          progress: bool | None = None, **run_options: Any) -> SweepTable:
+    """Run ``run_dae`` over parameter variants of ``mech``.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    params : dict or list of dict
+        Dotted model paths (see :func:`with_params`) to value lists (a grid) or a list of
+        explicit cases.
+    t_end : float
+        End time of every run, s.
+    metrics : callable or None
+        ``f(Result) -> dict`` of numbers per row; default :func:`default_metrics`.
+    client : dask.distributed.Client or None
+        Run on that cluster; None: a local process pool of ``workers`` (default: all cores).
+    checkpoint : path or None
+        CSV that rows stream into as they finish; rows already in it are not run again.
+    progress : bool or None
+        A progress bar on stderr (default: for 20 or more cases on a terminal).
+    **run_options
+        Passed to :func:`cmm_dae.run_dae` (rtol, atol, output_dt, ...).
+
+    Returns
+    -------
+    SweepTable
+        One row per case, ordered like the input, with ``case``, the parameters, the
+        metrics, ``status``, ``message``, ``t_reached`` and ``wall_s``.
+    """
+    cases = cases_from(params)
+    names = list(dict.fromkeys(k for c in cases for k in c))
+    if cases:
+        with_params(mech, cases[0])  # a bad path fails here, not in every worker
+    ck_path = Path(checkpoint) if checkpoint is not None else None
+    done = _read_checkpoint(ck_path, names) if ck_path is not None else {}
+    rows: list[dict[str, Any] | None] = [None] * len(cases)
+    todo = []
+    for i, c in enumerate(cases):
+        prev = done.get(_key(c, names))
+        if prev is not None:
+            rows[i] = dict(prev, case=i)
+        else:
+            todo.append(i)
+    ck = _Checkpoint(ck_path)
+    show = progress if progress is not None else (len(todo) >= 20 and sys.stderr.isatty())
+    bar = _Progress(len(todo), show)
+
+    def finish(i: int, row: dict[str, Any]) -> None:
+        row = {"case": i, **row}
+        rows[i] = row
+        ck.write(row)
+        bar.step()
+
+    if client is not None:
+        from distributed import as_completed
+
+        futures = {client.submit(run_case, mech, cases[i], t_end, metrics, run_options,
+                                 pure=False): i for i in todo}
+        for fut in as_completed(futures):
+            finish(futures[fut], fut.result())
+    elif todo:
+        n = workers or os.cpu_count() or 1
+        if n == 1 or len(todo) == 1:
+            for i in todo:
+                finish(i, run_case(mech, cases[i], t_end, metrics, run_options))
+        else:
+            with ProcessPoolExecutor(max_workers=n) as pool:
+                pending = {pool.submit(run_case, mech, cases[i], t_end, metrics,
+                                       run_options): i for i in todo}
+                while pending:
+                    fin, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in fin:
+                        finish(pending.pop(fut), fut.result())
+    return SweepTable([r for r in rows if r is not None])
+
+
+def parse_range(spec: str) -> tuple[str, list[float]]:
+    """``path=a:b:n`` (n values from a to b), ``path=v1,v2,...`` or ``path=v``."""
+    if "=" not in spec:
+        raise ModelError(Problem("sweep", "--param", f"expected PATH=A:B:N or PATH=V1,V2; "
+                                 f"got {spec!r}"))
+    path, rhs = spec.split("=", 1)
+    try:
+        if ":" in rhs:
+            a, b, n = rhs.split(":")
+            values = list(np.linspace(float(a), float(b), int(n)))
+        else:
+            values = [float(v) for v in rhs.split(",")]
+    except ValueError:
+        raise ModelError(Problem("sweep", path, f"expected A:B:N or V1,V2,...; got {rhs!r}")
+                         ) from None
+    return path, values
