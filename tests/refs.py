@@ -152,3 +152,21 @@ def newton_euler(bodies: dict[str, dict], joints: list[dict], drivers: list[dict
         out.setdefault(jn, [])
         out[jn].append(val)
     return {k: np.array(v) for k, v in out.items()}
+
+
+def short_coupler_four_bar(tmp_path, ground: float):
+    """models/four_bar.toml with a 0.09 m coupler and the ground pivot D at ``ground`` m:
+    0.15 is a change-point linkage (s + l = p + q), 0.16 cannot turn its crank fully."""
+    from pathlib import Path
+
+    import cmm_dae as cd
+
+    models = Path(__file__).resolve().parent.parent / "models"
+    text = (models / "four_bar.toml").read_text().replace("D = [0.12, 0.0]",
+                                                          f"D = [{ground}, 0.0]")
+    text = text.replace("C = [0.12, 0.0] }", "C = [0.09, 0.0] }").replace(
+        "guess = [0.0216, 0.0337, 0.586]", "guess = [0.0216, 0.0337, 0.3]").replace(
+        "guess = [0.12, 0.0, 1.555]", f"guess = [{ground}, 0.0, 1.9]")
+    path = tmp_path / "toggle.toml"
+    path.write_text(text)
+    return cd.load(path)

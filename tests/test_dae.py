@@ -11,6 +11,8 @@ import pytest
 import cmm_dae as cd
 from cmm_dae.assembly import assemble_positions, assemble_velocities, initial_guess
 
+from refs import short_coupler_four_bar
+
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
 
@@ -56,13 +58,7 @@ def test_consistent_start_satisfies_all_levels():
 def test_failure_keeps_partial_result(tmp_path):
     """A non-Grashof four-bar driven through its toggle: the loop opens; the partial
     result reaches the dead point and the error says what happened."""
-    text = (MODELS / "four_bar.toml").read_text().replace("D = [0.12, 0.0]", "D = [0.15, 0.0]")
-    text = text.replace("C = [0.12, 0.0] }", "C = [0.09, 0.0] }").replace(
-        "guess = [0.0216, 0.0337, 0.586]", "guess = [0.0216, 0.0337, 0.3]").replace(
-        "guess = [0.12, 0.0, 1.555]", "guess = [0.15, 0.0, 1.9]")
-    path = tmp_path / "toggle.toml"
-    path.write_text(text)
-    mech = cd.load(path)
+    mech = short_coupler_four_bar(tmp_path, 0.15)
     with pytest.raises(cd.SolverError, match=r"dead point at t = 0\.34[0-9]* s: the constraints of "
                        r"joint A, joint B, joint C, joint D become dependent") as info:
         cd.run_dae(mech, 1.0, rtol=1e-8)

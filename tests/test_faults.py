@@ -11,6 +11,8 @@ import pytest
 import cmm_dae as cd
 import cmm_dae.dae as dae_mod
 
+from refs import short_coupler_four_bar
+
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
 
@@ -69,13 +71,7 @@ def test_keyboard_interrupt_keeps_partial_result(monkeypatch):
 def non_grashof(tmp_path: Path) -> cd.Mechanism:
     """Crank 0.04, coupler 0.09, rocker 0.1, ground 0.16: s + l > p + q, so the driven crank
     cannot turn fully; coupler and rocker reach a toggle (a dead point)."""
-    text = (MODELS / "four_bar.toml").read_text().replace("D = [0.12, 0.0]", "D = [0.16, 0.0]")
-    text = text.replace("C = [0.12, 0.0] }", "C = [0.09, 0.0] }").replace(
-        "guess = [0.0216, 0.0337, 0.586]", "guess = [0.0216, 0.0337, 0.3]").replace(
-        "guess = [0.12, 0.0, 1.555]", "guess = [0.16, 0.0, 1.9]")
-    path = tmp_path / "toggle.toml"
-    path.write_text(text)
-    return cd.load(path)
+    return short_coupler_four_bar(tmp_path, 0.16)
 
 
 def toggle_time() -> float:
