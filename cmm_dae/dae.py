@@ -243,13 +243,21 @@ def _hybrid_loop(model: Model, hs: ev.HybridState, opts: Options, q: np.ndarray,
     first_step = 0.0
     last_bounce: dict[str, float] = {}
     stayed: dict[str, float] = {}
+    # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
+    # jump in the prescribed acceleration, so the run restarts there.
+    breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
+                     if d.motion == "table" and 0.0 < d.times[-1] < opts.t_end})
     while t < opts.t_end:
         seg = _Segment(model, hs, opts)
         seg.step_budget = opts.max_steps - stats.steps
-        outcome = seg.run(t, q, v, rec, first_step, stats)
+        t_stop = next((b for b in breaks if b > t), opts.t_end)
+        outcome = seg.run(t, q, v, rec, first_step, stats, t_stop)
         stats.segments += 1
         if outcome is None:
             return
+        if outcome[3] is None:  # reached a driver breakpoint: restart, nothing switches
+            t, q, v = outcome[:3]
+            continue
         t, q, v, which = outcome
         first_step = 0.0
         joint, side, kind = which
@@ -377,7 +385,7 @@ class _Segment:
         out[1:] = ev.event_values(self.hs, c, lam, self.events, cd)
 
     def run(self, t0: float, q: np.ndarray, v: np.ndarray, rec: _Recorder, first_step: float,
-            stats: Stats):
+            stats: Stats, t_stop: float | None = None):
         model, opts = self.model, self.opts
         nq = model.nq
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
@@ -419,7 +427,10 @@ class _Segment:
             resfn, jacfn=self.jacfn, eventsfn=eventsfn, num_events=ne,
             rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
             first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)))
+        t_stop = opts.t_end if t_stop is None else t_stop
         outs = _output_times(opts, t0)
+        if t_stop < opts.t_end:
+            outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
         tspan = np.concatenate([[t0], outs])
         extra = None
         if tspan.size == 2:  # scikit-sundae returns internal steps for a 2-point tspan
@@ -452,6 +463,8 @@ class _Segment:
             info = np.asarray(r.i_events)[-1]
             hit = int(np.flatnonzero(info[1:] != 0)[0])
             return float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), self.events[hit]
+        if t_stop < opts.t_end:
+            return float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), None
         return None
 
     def _stats(self, stats: Stats, r) -> None:

@@ -43,7 +43,8 @@ def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
         return sum(c * t**k for k, c in enumerate(d.coefficients))
     if d.motion == "harmonic":
         return d.initial + d.amplitude * ca.sin(2 * np.pi * d.frequency * t + d.phase)
-    # Clamped cubic spline (zero end slopes): C2 inside the table.
+    # Clamped cubic spline (zero end slopes): C2 inside the table; held at the last value
+    # after it (C1 there, thanks to the zero end slope).
     sp = CubicSpline(np.array(d.times), np.array(d.values), bc_type="clamped")
     f = None
     for i, t0 in enumerate(sp.x[:-1]):
@@ -51,7 +52,7 @@ def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
         s = t - t0
         piece = ((c[0] * s + c[1]) * s + c[2]) * s + c[3]
         f = piece if f is None else ca.if_else(t >= t0, piece, f)
-    return f
+    return ca.if_else(t >= sp.x[-1], float(d.values[-1]), f)
 
 
 class Fast:

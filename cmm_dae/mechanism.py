@@ -154,7 +154,8 @@ class Driver:
     motion : {"constant_speed", "polynomial", "harmonic", "table"}
         ``constant_speed``: ``initial + speed t``; ``polynomial``: ``sum c_k t^k``;
         ``harmonic``: ``initial + amplitude sin(2 pi frequency t + phase)``;
-        ``table``: C2 cubic spline through ``times``/``values`` with zero end slopes.
+        ``table``: C2 cubic spline through ``times``/``values`` with zero end slopes,
+        held at the last value after the last time.
     Units: rad, rad/s, Hz, s (m, m/s for a prismatic joint).
     """
 
