@@ -13,6 +13,8 @@ from scipy.optimize import least_squares
 
 from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
+from .events import HybridState
+from .result import Event
 
 #: Position residual (m or rad) below which a loop counts as closed.
 CLOSE_TOL = 1e-10
@@ -140,3 +142,52 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
                                  f"joint rates, got {len(names)}"), model.mech.source)
     check_rank(model, J, act, names, t)
     return np.linalg.solve(J, rhs)
+
+
+def start_state(model: Model, hs: HybridState, t0: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+    """Consistent positions and velocities at t0, with joints that start pressed on a stop
+    locked (a ``lock`` event each)."""
+    mech = model.mech
+    ini = mech.initial
+    # A joint given exactly on one of its limits is a candidate for a start on the stop.
+    on_stop = {}
+    for name in model.locks:
+        if name in ini.joints:
+            lim = mech.joints[name].limits
+            val = ini.joints[name]
+            for side, L in (("lower", lim.lower), ("upper", lim.upper)):
+                if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
+                    on_stop[name] = side
+    known = {k: v for k, v in ini.joints.items() if k not in mech.drivers}
+    rates = {k: 0.0 for k in known}
+    rates.update({k: v for k, v in ini.velocities.items() if k not in mech.drivers})
+    if len(ini.velocities) and set(ini.velocities) != set(known) and \
+            len(ini.velocities) == len(known):
+        rates = dict(ini.velocities)
+    q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
+    v = assemble_velocities(model, q, t0, hs.p, rates)
+    c0 = model.cvel(q, v)[0]
+    beyond = []
+    for name in model.locks:
+        lim = mech.joints[name].limits
+        val = float(c0[model.jidx[name]])
+        tol = 1e-12 * max(1.0, abs(val))
+        if (lim.lower is not None and val < lim.lower - tol) or (
+                lim.upper is not None and val > lim.upper + tol):
+            beyond.append(Problem("initial", "joints", f"joint '{name}' assembles at {val:.9g}, "
+                                  f"outside its limits [{lim.lower}, {lim.upper}]"))
+    if beyond:
+        raise ModelError(beyond, mech.source)
+    events: list[Event] = []
+    for name, side in on_stop.items():
+        if rates.get(name, 0.0) != 0.0:
+            continue
+        before = hs.current()
+        hs.locked[name] = side
+        _, lam, _ = model.kkt(q, v, t0, hs.p)
+        if hs.push(lam, name) > 0.0:
+            events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
+        else:
+            del hs.locked[name]
+    return q, v, events

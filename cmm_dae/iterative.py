@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from . import events as ev
-from .dae import start_state
+from .assembly import start_state
 from .equations import Model
 from .errors import CmmError, ModelError, Problem, SolverError
 from .mechanism import Mechanism
