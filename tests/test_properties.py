@@ -20,6 +20,14 @@ def rot(v, phi):
     return (c * v[0] - s * v[1], s * v[0] + c * v[1])
 
 
+def significant(events):
+    """Events that are well-conditioned: the impacts faster than 0.01 (rad or m)/s, and
+    releases. In the slow tail of a bounce sequence each impact time carries the
+    amplified errors of all earlier ones (and whether the last one is a bounce or a lock is
+    decided by the Zeno threshold), so a rotated copy may legitimately differ there."""
+    return [e for e in events if abs(e.velocity_before) > 1e-2 or e.kind == "release"]
+
+
 @st.composite
 def slider_cranks(draw):
     """A free (undriven) slider-crank: torsional spring-damper at A, stop(s) on the slider."""
@@ -97,9 +105,11 @@ def test_energy_balance_and_drift(p):
 def test_rotation_invariance(p, phi):
     a = cd.run_dae(slider_crank(p), 1.0, rtol=1e-10, atol=1e-12, output_dt=0.01)
     b = cd.run_dae(slider_crank(p, phi), 1.0, rtol=1e-10, atol=1e-12, output_dt=0.01)
-    assert [(e.kind, e.joint) for e in a.events] == [(e.kind, e.joint) for e in b.events]
-    for ea, eb in zip(a.events, b.events, strict=True):
-        assert abs(ea.t - eb.t) <= 1e-7
+    ea_, eb_ = significant(a.events), significant(b.events)
+    assert [(e.kind, e.joint) for e in ea_] == [(e.kind, e.joint) for e in eb_]
+    for ea, eb in zip(ea_, eb_, strict=True):
+        # a position error of the solver's tolerance moves an impact by ~ tol / speed
+        assert abs(ea.t - eb.t) <= 1e-7 + 1e-10 / max(abs(ea.velocity_before), 1e-12)
     if a.t.size == b.t.size:
         assert np.max(np.abs(a.joint("E").position - b.joint("E").position)) <= 1e-8
         assert np.max(np.abs(a.joint("A").position + phi - b.joint("A").position)) <= 1e-7
@@ -186,8 +196,12 @@ def test_four_bar_energy_drift_rotation(p, phi):
     pos, vel = a.drift
     assert pos <= 1e-9 and vel <= 1e-7
     b = cd.run_dae(four_bar(p, phi), 1.0, rtol=1e-10, atol=1e-12, output_dt=2.5e-4)
-    assert [(e.kind, e.joint) for e in a.events] == [(e.kind, e.joint) for e in b.events]
-    for ea, eb in zip(a.events, b.events, strict=True):
-        assert abs(ea.t - eb.t) <= 1e-7
-    if a.t.size == b.t.size:
+    ea_, eb_ = significant(a.events), significant(b.events)
+    assert [(e.kind, e.joint) for e in ea_] == [(e.kind, e.joint) for e in eb_]
+    for ea, eb in zip(ea_, eb_, strict=True):
+        # a position error of the solver's tolerance moves an impact by ~ tol / speed
+        assert abs(ea.t - eb.t) <= 1e-7 + 1e-10 / max(abs(ea.velocity_before), 1e-12)
+    assert a.configurations[a.configuration[-1]].locked == \
+        b.configurations[b.configuration[-1]].locked
+    if a.t.size == b.t.size and len(a.events) == len(b.events):
         assert np.max(np.abs(a.joint("C").position - b.joint("C").position)) <= 1e-7
