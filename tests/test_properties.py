@@ -126,6 +126,10 @@ def test_both_integrators_same_event_sequence(p):
     # grazing contacts (arrival within a few steps of a turning point) may legitimately
     # differ between a located event and a step-end check: skip those examples
     assume(all(abs(e.velocity_before) > 0.05 or e.kind == "release" for e in a.events))
+    # near misses likewise: the explicit scheme gains a little energy and may touch a stop
+    # that the exact motion turns back from just before
+    if not a.events:
+        assume(np.min(p["upper"] - a.joint("E").position) > 2e-3)
     b = cd.run_iterative(mech, 0.5, dt=5e-4, output_every=20)
     assert [(e.kind, e.joint) for e in a.events] == [(e.kind, e.joint) for e in b.events]
     for ea, eb in zip(a.events, b.events, strict=True):
