@@ -49,7 +49,7 @@ def test_grid_order_and_values(mech, local_table):
 
 
 def test_dask_local_cluster_same_table(mech, local_table):
-    distributed = pytest.importorskip("distributed")
+    import distributed  # a test dependency (the "test" extra): never skipped
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
