@@ -20,6 +20,16 @@ def rot(v, phi):
     return (c * v[0] - s * v[1], s * v[0] + c * v[1])
 
 
+def assert_balanced(res) -> None:
+    """Energy balance within 1e-6 of the energy moved about; drift within DESIGN's bounds."""
+    en = res.energy()
+    scale = float(np.max(en.kinetic + np.abs(en.potential - en.potential[0]) + en.spring)
+                  + en.damper_dissipation[-1] + en.impact_losses[-1])
+    assert np.max(np.abs(en.residual)) <= 1e-6 * scale
+    pos, vel = res.drift
+    assert pos <= 1e-9 and vel <= 1e-7
+
+
 def significant(events):
     """Events that are well-conditioned: the impacts faster than 0.01 (rad or m)/s, and
     releases. In the slow tail of a bounce sequence each impact time carries the
@@ -93,12 +103,7 @@ def test_energy_balance_and_drift(p):
     # the audit integrates power over the output samples: 0.25 ms keeps Simpson's error
     # below the bound even where a damper acts hard right after a start from rest
     res = cd.run_dae(mech, 1.0, rtol=1e-10, atol=1e-12, output_dt=2.5e-4)
-    en = res.energy()
-    scale = float(np.max(en.kinetic + np.abs(en.potential - en.potential[0]) + en.spring)
-                  + en.damper_dissipation[-1] + en.impact_losses[-1])
-    assert np.max(np.abs(en.residual)) <= 1e-6 * scale
-    pos, vel = res.drift
-    assert pos <= 1e-9 and vel <= 1e-7
+    assert_balanced(res)
 
 
 @given(slider_cranks(), st.floats(0.1, 2 * math.pi - 0.1))
@@ -193,12 +198,7 @@ def four_bar(p: dict, phi: float = 0.0) -> cd.Mechanism:
 @given(four_bars(), st.floats(0.1, 2 * math.pi - 0.1))
 def test_four_bar_energy_drift_rotation(p, phi):
     a = cd.run_dae(four_bar(p), 1.0, rtol=1e-10, atol=1e-12, output_dt=2.5e-4)
-    en = a.energy()
-    scale = float(np.max(en.kinetic + np.abs(en.potential - en.potential[0]) + en.spring)
-                  + en.damper_dissipation[-1] + en.impact_losses[-1])
-    assert np.max(np.abs(en.residual)) <= 1e-6 * scale
-    pos, vel = a.drift
-    assert pos <= 1e-9 and vel <= 1e-7
+    assert_balanced(a)
     b = cd.run_dae(four_bar(p, phi), 1.0, rtol=1e-10, atol=1e-12, output_dt=2.5e-4)
     ea_, eb_ = significant(a.events), significant(b.events)
     assert [(e.kind, e.joint) for e in ea_] == [(e.kind, e.joint) for e in eb_]
