@@ -114,13 +114,9 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: f
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
                        stats, status)
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
-    if err is not None:
-        if isinstance(err, KeyboardInterrupt) and throw:
-            raise SolverError(status, result=res, configuration=hs.current(),
-                              last_event=events[-1] if events else None) from err
-        if throw:
-            raise SolverError(status, result=res, configuration=hs.configurations[hs.current()],
-                              last_event=events[-1] if events else None) from None
+    if err is not None and throw:
+        raise SolverError(status, result=res, configuration=hs.configurations[hs.current()],
+                          last_event=events[-1] if events else None) from err
     return res
 
 

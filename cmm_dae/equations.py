@@ -225,19 +225,15 @@ class Model:
             Qf[3 * i + 1] += b.mass * g[1]
         c_q = ca.jacobian(c, q)
         cdot = c_q @ v
-        V = 0.0
         for name, j in mech.joints.items():
             k = jidx[name]
             gen = 0.0
             if j.spring is not None:
                 gen -= j.spring.stiffness * (c[k] - j.spring.rest)
-                V += 0.5 * j.spring.stiffness * (c[k] - j.spring.rest) ** 2
             if j.damper is not None:
                 gen -= j.damper.damping * cdot[k]
             if not (isinstance(gen, float) and gen == 0.0):
                 Qf += c_q[k, :].T * gen
-        for i, b in enumerate(mech.bodies.values()):
-            V -= b.mass * (g[0] * q[3 * i] + g[1] * q[3 * i + 1])
         cddot = c_q @ a + ca.jacobian(cdot, q) @ v
 
         # Points where joint forces are reported: each joint's second (or first) connect point.
@@ -254,7 +250,6 @@ class Model:
                                                      dn(c_q)])
         self.kkt_fn = ca.Function("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)])
         self.post_fn = ca.Function("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)])
-        self.energy_fn = ca.Function("energy", [q], [dn(V)])
         self.free_fn = ca.Function("free", [p], [dn(free)])
         # fast single-point evaluations for the step-by-step paths
         self.phi = Fast(self.phi_fn)
@@ -285,7 +280,6 @@ class Model:
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
         # Transposed: CasADi writes column-major, scikit-sundae's JJ is row-major.
         self.jac_fn = ca.Function("resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
-        self.n_alg = 2 * m
         self.compiled = False
         if compiled:
             funcs = compile_functions([self.res_fn, self.jac_fn])
