@@ -101,7 +101,7 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
 
 def differences(cmp: Comparison, path: Path) -> Path:
     """Differences a - b of the driving efforts and metamorphic-joint coordinates."""
-    from .report import _interp
+    from .report import resample
 
     a, b, t = cmp.a, cmp.b, cmp.t
     from .report import watched_joints
@@ -118,7 +118,7 @@ def differences(cmp: Comparison, path: Path) -> Path:
         else:
             ya, yb = a.joint(n).position, b.joint(n).position
             unit, lab = _unit(a, n), f"joint {n} position"
-        d = _interp(t, a, ya) - _interp(t, b, yb)
+        d = resample(t, a, ya) - resample(t, b, yb)
         ax.plot(t, np.where(cmp.mask, d, np.nan), color="k", lw=1.0)
         _event_lines(ax, a)
         ax.set_ylabel(f"diff [{unit}]")

@@ -17,8 +17,9 @@ from .errors import CmmError
 from .result import Result
 
 
-def _interp(t_grid: np.ndarray, res: Result, y: np.ndarray) -> np.ndarray:
-    """Linear interpolation of a series; at repeated (event) times the later sample wins."""
+def resample(t_grid: np.ndarray, res: Result, y: np.ndarray) -> np.ndarray:
+    """A series ``y`` of ``res`` linearly interpolated onto ``t_grid`` (s); at repeated
+    (event) times the later, post-event sample wins."""
     t = res.t
     keep = np.append(t[1:] != t[:-1], True)
     return np.interp(t_grid, t[keep], y[keep])
@@ -174,7 +175,7 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     series: list[SeriesDiff] = []
 
     def add(name: str, unit: str, ya: np.ndarray, yb: np.ndarray) -> None:
-        d = (_interp(t, a, ya) - _interp(t, b, yb))[mask]
+        d = (resample(t, a, ya) - resample(t, b, yb))[mask]
         scale = float(np.max(np.abs(ya), initial=0.0))
         series.append(SeriesDiff(name, unit, float(np.max(np.abs(d), initial=0.0)),
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))

@@ -16,7 +16,7 @@ from .dae import run_dae
 from .equations import Model
 from .iterative import run_iterative
 from .mechanism import Mechanism
-from .report import _interp
+from .report import resample
 from .result import Result
 
 
@@ -31,7 +31,7 @@ def _error(res: Result, ref: Result, t: np.ndarray, series: str) -> float:
         ya, yb = res.driver(name).effort, ref.driver(name).effort
     else:
         ya, yb = res.joint(name).position, ref.joint(name).position
-    d = _interp(t, res, ya) - _interp(t, ref, yb)
+    d = resample(t, res, ya) - resample(t, ref, yb)
     return float(np.max(np.abs(d[mask]), initial=0.0))
 
 

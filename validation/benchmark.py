@@ -22,6 +22,7 @@ import numpy as np
 
 import cmm_dae as cd
 from cmm_dae.bench import bench_models, table
+from cmm_dae.report import resample
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -31,8 +32,7 @@ import minimal_double_folded as mdf  # noqa: E402
 
 
 def torque_error(t, tau, ref, events) -> float:
-    keep = np.append(ref.t[1:] != ref.t[:-1], True)
-    r = np.interp(t, ref.t[keep], ref.driver("A").effort[keep])
+    r = resample(t, ref, ref.driver("A").effort)
     far = np.ones(t.size, bool)
     for te in events:
         far &= np.abs(t - te) > 0.02
@@ -65,25 +65,22 @@ def main() -> None:
     ref_ev = [e.t for e in ref.events]
     grid = np.round(np.arange(0, 1001) * 0.01, 10)
     wp = []
+
+    def row(method: str, setting: str, wall: float, r: cd.Result) -> dict:
+        tau = resample(grid, r, r.driver("A").effort)
+        return {"method": method, "setting": setting, "wall": wall,
+                "error": torque_error(grid, tau, ref, ref_ev),
+                "switch_err": max(abs(a.t - b) for a, b in zip(r.events, ref_ev, strict=True))}
+
     for rt in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10):
         w, r = best_of(lambda rt=rt: cd.run_dae(mech, 10.0, rtol=rt, atol=rt * 1e-2,
                                                 output_dt=0.01, model=model))
-        keep = np.append(r.t[1:] != r.t[:-1], True)
-        tau = np.interp(grid, r.t[keep], r.driver("A").effort[keep])
-        wp.append({"method": "IDA", "setting": f"rtol {rt:g}", "wall": w,
-                   "error": torque_error(grid, tau, ref, ref_ev),
-                   "switch_err": max(abs(a.t - b) for a, b in zip(r.events, ref_ev,
-                                                                   strict=True))})
+        wp.append(row("IDA", f"rtol {rt:g}", w, r))
     for dt in (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4):
         n = 1 if dt < 1e-3 else 3
         w, r = best_of(lambda dt=dt: cd.run_iterative(
             mech, 10.0, dt=dt, model=model, output_every=int(round(0.01 / dt))), n)
-        keep = np.append(r.t[1:] != r.t[:-1], True)
-        tau = np.interp(grid, r.t[keep], r.driver("A").effort[keep])
-        wp.append({"method": "iterative", "setting": f"dt {dt:g}", "wall": w,
-                   "error": torque_error(grid, tau, ref, ref_ev),
-                   "switch_err": max(abs(a.t - b) for a, b in zip(r.events, ref_ev,
-                                                                   strict=True))})
+        wp.append(row("iterative", f"dt {dt:g}", w, r))
     for rt in (1e-4, 1e-6, 1e-8, 1e-10):
         w, o = best_of(lambda rt=rt: mdf.simulate(mech, 10.0, rtol=rt, t_eval=grid), 1)
         wp.append({"method": "DOP853 minimal coordinates", "setting": f"rtol {rt:g}",

@@ -23,6 +23,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import cmm_dae as cd
+from cmm_dae.report import resample
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -234,8 +235,7 @@ def main() -> None:
     w0 = time.perf_counter()
     out = simulate(mech, 10.0, rtol=1e-10)
     wall = time.perf_counter() - w0
-    keep = np.append(ref.t[1:] != ref.t[:-1], True)
-    tau_ref = np.interp(out["t"], ref.t[keep], ref.driver("A").effort[keep])
+    tau_ref = resample(out["t"], ref, ref.driver("A").effort)
     far = np.ones(out["t"].size, bool)
     for e in ref.events:
         far &= np.abs(out["t"] - e.t) > 0.02
