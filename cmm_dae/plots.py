@@ -37,43 +37,46 @@ def _unit(res: Result, joint: str) -> str:
     return "rad" if res.meta["joint_types"][i] == "revolute" else "m"
 
 
-def driving_effort(results: list[Result], path: Path) -> Path:
-    """Driving torque/force vs time for each result (paper Figs. 16 and 23)."""
+def _stacked(results: list[Result], names: list[str], series, labels, height: float,
+             path: Path) -> Path:
+    """One panel per name, every result on it: ``series(result, name)`` against time;
+    ``labels(name)`` gives (ylabel, title)."""
     r0 = results[0]
-    drivers = r0.meta["drivers"]
-    fig, axes = plt.subplots(len(drivers), 1, figsize=(8, 3.2 * len(drivers)), squeeze=False)
-    for ax, name in zip(axes[:, 0], drivers, strict=True):
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, height * len(names)), squeeze=False)
+    for ax, name in zip(axes[:, 0], names, strict=True):
         for k, r in enumerate(results):
-            ax.plot(r.t, r.driver(name).effort, label=_label(r), **STYLE[k % 2])
+            ax.plot(r.t, series(r, name), label=_label(r), **STYLE[k % 2])
         _event_lines(ax, r0)
-        unit = "N m" if _unit(r0, name) == "rad" else "N"
-        what = "torque" if unit == "N m" else "force"
-        ax.set(xlabel="time [s]", ylabel=f"driving {what} [{unit}]",
-               title=f"{r0.meta['mechanism']}: driving {what} at joint {name}")
+        ylabel, title = labels(name)
+        ax.set(xlabel="time [s]", ylabel=ylabel, title=title)
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def driving_effort(results: list[Result], path: Path) -> Path:
+    """Driving torque/force vs time for each result (paper Figs. 16 and 23)."""
+    r0 = results[0]
+
+    def labels(name):
+        unit = "N m" if _unit(r0, name) == "rad" else "N"
+        what = "torque" if unit == "N m" else "force"
+        return (f"driving {what} [{unit}]",
+                f"{r0.meta['mechanism']}: driving {what} at joint {name}")
+
+    return _stacked(results, r0.meta["drivers"], lambda r, n: r.driver(n).effort, labels,
+                    3.2, path)
 
 
 def joint_motion(results: list[Result], joints: list[str], path: Path) -> Path:
     """Relative motion of the metamorphic joints vs time (paper Fig. 17)."""
     r0 = results[0]
-    fig, axes = plt.subplots(len(joints), 1, figsize=(8, 2.8 * len(joints)), squeeze=False)
-    for ax, name in zip(axes[:, 0], joints, strict=True):
-        for k, r in enumerate(results):
-            ax.plot(r.t, r.joint(name).position, label=_label(r), **STYLE[k % 2])
-        _event_lines(ax, r0)
-        ax.set(xlabel="time [s]", ylabel=f"joint {name} [{_unit(r0, name)}]",
-               title=f"relative motion of metamorphic joint {name}")
-        ax.grid(alpha=0.3)
-        ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _stacked(results, joints, lambda r, n: r.joint(n).position,
+                    lambda n: (f"joint {n} [{_unit(r0, n)}]",
+                               f"relative motion of metamorphic joint {n}"), 2.8, path)
 
 
 def joint_forces(results: list[Result], joint: str, path: Path) -> Path:

@@ -32,20 +32,22 @@ def sequence(res):
              res.configurations[e.after].label) for e in res.events]
 
 
-@pytest.fixture(scope="module")
-def double_folded():
-    mech = cd.load(MODELS / "double_folded.toml")
+def both_methods(name: str):
+    """One cycle of a model with IDA (rtol 1e-9) and the iterative algorithm (dt 0.01)."""
+    mech = cd.load(MODELS / f"{name}.toml")
     model = cd.Model(mech)
     return (mech, cd.run_dae(mech, 10.0, rtol=1e-9, atol=1e-11, model=model),
             cd.run_iterative(mech, 10.0, dt=0.01, model=model))
+
+
+@pytest.fixture(scope="module")
+def double_folded():
+    return both_methods("double_folded")
 
 
 @pytest.fixture(scope="module")
 def nipper():
-    mech = cd.load(MODELS / "nipper_swing.toml")
-    model = cd.Model(mech)
-    return (mech, cd.run_dae(mech, 10.0, rtol=1e-9, atol=1e-11, model=model),
-            cd.run_iterative(mech, 10.0, dt=0.01, model=model))
+    return both_methods("nipper_swing")
 
 
 def test_double_folded_sequence(double_folded):
