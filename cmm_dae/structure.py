@@ -110,6 +110,29 @@ def _letter(mech: Mechanism, j: str) -> str:
     return "R" if mech.joints[j].type == "revolute" else "P"
 
 
+def _other(mech: Mechanism, joint: str, body: str) -> str:
+    j = mech.joints[joint]
+    return j.second_body if j.first_body == body else j.first_body
+
+
+def _touches(mech: Mechanism, joint: str, body: str) -> bool:
+    return body in (mech.joints[joint].first_body, mech.joints[joint].second_body)
+
+
+def _walk(mech: Mechanism, adj: dict[str, list[str]], degree: dict[str, int], body: str,
+          seq: list[str]) -> tuple[list[str], str]:
+    """Follow internal joints from ``body`` (``seq`` holds the joints taken so far) until a
+    free end or a body with more than two internal joints; returns (joints, last body)."""
+    seen = set(seq)
+    while True:
+        nxt = [k for k in adj[body] if k not in seen]
+        if not nxt or degree[body] > 2:
+            return seq, body
+        seq.append(nxt[0])
+        seen.add(nxt[0])
+        body = _other(mech, nxt[0], body)
+
+
 def _group_name(mech: Mechanism, bodies: set[str], internal: list[str], external: list[str]
                 ) -> str:
     """Letters along the group: a chain from one external joint to the other, or branches
@@ -120,45 +143,20 @@ def _group_name(mech: Mechanism, bodies: set[str], internal: list[str], external
         adj[mech.joints[j].second_body].append(j)
     degree = {b: len(adj[b]) for b in bodies}
     if max(degree.values(), default=0) <= 2:  # chain
-        ends = [j for j in external]
-        if not ends:
+        if not external:
             return "".join(_letter(mech, j) for j in internal)
-        start = ends[0]
-        b = next(x for x in (mech.joints[start].first_body, mech.joints[start].second_body)
-                 if x in bodies)
-        seq, seen = [start], {start}
-        while True:
-            nxt = [j for j in adj[b] if j not in seen]
-            if not nxt:
-                break
-            j = nxt[0]
-            seq.append(j)
-            seen.add(j)
-            jj = mech.joints[j]
-            b = jj.second_body if jj.first_body == b else jj.first_body
-        rest = [j for j in external if j not in seen]
-        seq += rest[:1]
+        start = external[0]
+        body = next(x for x in bodies if _touches(mech, start, x))
+        seq, _ = _walk(mech, adj, degree, body, [start])
+        seq += [j for j in external if j not in seq][:1]
         return "".join(_letter(mech, j) for j in seq)
     hub = max(bodies, key=lambda x: degree[x])
     branches = []
-    for j in adj[hub]:
-        seq, seen, cur = [j], {j}, hub
-        jj = mech.joints[j]
-        cur = jj.second_body if jj.first_body == hub else jj.first_body
-        while True:  # walk out along the branch to its external joint(s)
-            nxt = [k for k in adj[cur] if k not in seen]
-            if not nxt or degree[cur] > 2:
-                break
-            k = nxt[0]
-            seq.append(k)
-            seen.add(k)
-            kk = mech.joints[k]
-            cur = kk.second_body if kk.first_body == cur else kk.first_body
-        ext = [e for e in external if cur in (mech.joints[e].first_body,
-                                              mech.joints[e].second_body)]
+    for j in adj[hub]:  # each branch: its external joint(s), then inward to the hub
+        seq, end = _walk(mech, adj, degree, _other(mech, j, hub), [j])
+        ext = [e for e in external if _touches(mech, e, end)]
         branches.append("".join(_letter(mech, e) for e in ext + seq[::-1]))
-    hub_ext = [e for e in external if hub in (mech.joints[e].first_body,
-                                              mech.joints[e].second_body)]
+    hub_ext = [e for e in external if _touches(mech, e, hub)]
     if hub_ext:
         branches.append("".join(_letter(mech, e) for e in hub_ext))
     return "-".join(branches)
