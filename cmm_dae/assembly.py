@@ -33,11 +33,6 @@ def initial_guess(model: Model) -> np.ndarray:
     return q
 
 
-def _active_rows(model: Model, p: np.ndarray) -> np.ndarray:
-    free = model.free(p)[0]
-    return np.flatnonzero(free == 0.0)
-
-
 def _labels(model: Model, rows, known: list[str]) -> list[str]:
     out = []
     for i in rows:
@@ -60,7 +55,7 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
     AssemblyError
         The loop does not close (residual named) or the equations are singular.
     """
-    act = _active_rows(model, p)
+    act = model.active_rows(p)
     names = list(known)
     kidx = [model.jidx[n] for n in names]
     vals = np.array([known[n] for n in names])
@@ -75,10 +70,9 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
             + (f" ({', '.join(names)})" if names else "")), model.mech.source)
 
     def fun(q):
-        phi, Phi_q, _ = model.phi(q, t, p)
-        c, _, c_q = model.coord(q, np.zeros(model.nq))
-        r = np.concatenate([np.asarray(phi).ravel()[act], np.asarray(c).ravel()[kidx] - vals])
-        J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
+        con, c, c_q = model.kinematics(q, t, p)
+        r = np.concatenate([con.phi[act], c[kidx] - vals])
+        J = np.vstack([con.Phi_q[act], c_q[kidx]])
         return r, J
 
     q = np.array(q_guess, float)
@@ -129,14 +123,12 @@ def check_rank(model: Model, J: np.ndarray, act, names: list[str], t: float) -> 
 def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
                         rates: dict[str, float]) -> np.ndarray:
     """Solve ``Phi_q v = -Phi_t`` plus ``c_j' = rates[j]`` for v."""
-    act = _active_rows(model, p)
+    act = model.active_rows(p)
     names = list(rates)
     kidx = [model.jidx[n] for n in names]
-    zero = np.zeros(model.nq)
-    _, Phi_q, h0 = model.phi(q, t, p)  # h(q, 0, t) = Phi_t
-    _, _, c_q = model.coord(q, zero)
-    J = np.vstack([np.asarray(Phi_q)[act], np.asarray(c_q)[kidx]])
-    rhs = np.concatenate([-np.asarray(h0).ravel()[act], [rates[n] for n in names]])
+    con, _, c_q = model.kinematics(q, t, p)
+    J = np.vstack([con.Phi_q[act], c_q[kidx]])
+    rhs = np.concatenate([-con.Phi_t[act], [rates[n] for n in names]])
     if J.shape[0] != J.shape[1]:
         raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
                                  f"joint rates, got {len(names)}"), model.mech.source)
@@ -167,7 +159,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
         rates = dict(ini.velocities)
     q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
     v = assemble_velocities(model, q, t0, hs.p, rates)
-    c0 = model.cvel(q, v)[0]
+    c0 = model.joint_rates(q, v)[0]
     beyond = []
     for name in model.locks:
         lim = mech.joints[name].limits
@@ -183,11 +175,9 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     for name, side in on_stop.items():
         if rates.get(name, 0.0) != 0.0:
             continue
-        before = hs.current()
-        hs.locked[name] = side
-        _, lam, _ = model.kkt(q, v, t0, hs.p)
-        if hs.push(lam, name) > 0.0:
+        trial = {**hs.locked, name: side}
+        if hs.lock_force(q, v, t0, name, trial) > 0.0:
+            before = hs.current()
+            hs.locked = trial
             events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
-        else:
-            del hs.locked[name]
     return q, v, events

@@ -10,10 +10,9 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from .dae import run_dae
 from .equations import Model
-from .iterative import run_iterative
 from .loader import load
+from .simulate import run_dae, run_iterative
 
 
 def _best(fn, repeat: int) -> tuple[float, object]:

@@ -44,61 +44,85 @@ def _save(res, args) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from . import run_dae
+    from . import simulate
 
-    res = run_dae(_load(args.model), args.t_end, rtol=args.rtol, atol=args.atol,
-                  output_dt=args.output_dt)
+    res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
+                   output_dt=args.output_dt)
     _summary(res)
     _save(res, args)
     return 0
 
 
 def _iterate(args: argparse.Namespace) -> int:
-    from . import run_iterative
+    from . import simulate
 
-    res = run_iterative(_load(args.model), args.t_end, dt=args.dt)
+    res = simulate(_load(args.model), args.t_end, method="iterative", dt=args.dt)
     _summary(res)
     _save(res, args)
     return 0
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from . import Model, compare, run_dae, run_iterative
+    from . import Model, compare, simulate
     from .plots import work_precision as wp_plot
     from .studies import work_precision
 
     mech = _load(args.model)
     model = Model(mech)
-    a = run_dae(mech, args.t_end, rtol=args.rtol, atol=args.rtol * 1e-2, output_dt=args.dt,
-                model=model)
-    b = run_iterative(mech, args.t_end, dt=args.dt, model=model)
-    cmp = compare(a, b)
+    runs = {"IDA": dict(method="ida", rtol=args.rtol, atol=args.rtol * 1e-2,
+                        output_dt=args.dt),
+            "iterative": dict(method="iterative", dt=args.dt)}
+    res, notes = [], []
+    for name, kw in runs.items():  # a failing run still gives its partial Result
+        r = simulate(mech, args.t_end, model=model, throw=False, **kw)
+        if not r.success:
+            notes.append(f"the {name} run failed at t = {r.t[-1]:.6g} s ({r.status}): "
+                         f"{r.message}; the comparison covers what both runs reached")
+        res.append(r)
+    cmp = compare(*res)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if not args.no_work_precision and mech.drivers:
-        wp = work_precision(mech, t_end=args.t_end, model=model)
-        cmp.work_precision = wp
-        cmp.extra_figures["Work-precision: error in the driving effort vs wall time"] = wp_plot(
-            wp["rows"], out / "work_precision.png",
-            f"{mech.name}: driving-effort error vs wall time\n(reference: IDA at rtol "
-            f"{wp['reference_rtol']:g}, errors away from events)")
+    if args.no_work_precision:
+        pass
+    elif not mech.drivers:
+        notes.append("no work-precision study: the mechanism has no driver")
+    else:
+        try:
+            wp = work_precision(mech, t_end=args.t_end, model=model)
+        except CmmError as e:
+            notes.append(f"work-precision study left out: {e}")
+        else:
+            cmp.work_precision = wp
+            notes += [f"work-precision run {r.method} {r.setting} failed ({r.status})"
+                      for r in wp.rows if not r.success]
+            cmp.extra_figures["Work-precision: error in the driving effort vs wall time"] = \
+                wp_plot(wp.rows, out / "work_precision.png",
+                        f"{mech.name}: driving-effort error vs wall time\n(reference: IDA at "
+                        f"rtol {wp.reference_rtol:g}, errors away from events)")
+    cmp.notes = notes
     path = cmp.write_report(out)
     print(cmp.table())
+    for n in notes:
+        print(f"note: {n}", file=sys.stderr)
     print(f"wrote {path} and {path.with_suffix('.html')}")
-    return 0
+    return 0 if all(r.success for r in res) else 3
+
+
+def _result_of(source: str, t_end: float):
+    """A saved Result (.npz) or a run of a model file (.toml); anything else is refused."""
+    from . import load_result, simulate
+
+    path = Path(source)
+    if path.suffix == ".npz":
+        return load_result(path)
+    if path.suffix == ".toml":
+        return simulate(_load(source), t_end)
+    raise CmmError(f"'{source}': expected a model file (.toml) or a saved result (.npz), "
+                   f"not a '{path.suffix or 'suffix-less'}' file")
 
 
 def _events(args: argparse.Namespace) -> int:
-    from . import load_result, run_dae
-
-    path = Path(args.source)
-    if path.suffix == ".npz":
-        if not path.is_file():
-            raise CmmError(f"no such result file: '{path}'")
-        res = load_result(path)
-    else:
-        res = run_dae(_load(args.source), args.t_end)
-    print(res.event_table())
+    print(_result_of(args.source, args.t_end).event_table())
     return 0
 
 
@@ -107,17 +131,6 @@ def _structure(args: argparse.Namespace) -> int:
 
     print(structure(_load(args.model)))
     return 0
-
-
-def _result_of(source: str, t_end: float):
-    from . import load_result, run_dae
-
-    path = Path(source)
-    if path.suffix == ".npz":
-        if not path.is_file():
-            raise CmmError(f"no such result file: '{path}'")
-        return load_result(path)
-    return run_dae(_load(source), t_end)
 
 
 def _animate(args: argparse.Namespace) -> int:
@@ -137,9 +150,7 @@ def _plot(args: argparse.Namespace) -> int:
     written = []
     if res.meta["drivers"]:
         written.append(plots.driving_effort([res], out / "driving.png"))
-    from .report import watched_joints
-
-    meta = watched_joints(res)
+    meta = res.watched_joints()
     if meta:
         written.append(plots.joint_motion([res], meta, out / "joints.png"))
         written += [plots.joint_forces([res], j, out / f"forces_{j}.png") for j in meta]
@@ -262,7 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``cmm-dae``; returns the exit code."""
+    """Entry point of ``cmm-dae``; returns the exit code (0 done, 2 bad input, 3 a run
+    failed part-way, 130 interrupted)."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
@@ -272,9 +284,28 @@ def main(argv: list[str] | None = None) -> int:
     except CmmError as err:
         print(f"cmm-dae: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `cmm-dae ... | head`: the reader left; nothing to say
+        _quiet_stdout()
+        return 0
     except OSError as err:
-        print(f"cmm-dae: {err}", file=sys.stderr)
+        print(f"cmm-dae: {err.strerror or err}" + (f": '{err.filename}'" if err.filename
+                                                     else ""), file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("cmm-dae: interrupted", file=sys.stderr)
+        return 130
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush into a closed pipe
+    says nothing either."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except OSError:
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

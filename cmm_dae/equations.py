@@ -55,13 +55,18 @@ def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
     return ca.if_else(t >= sp.x[-1], float(d.values[-1]), f)
 
 
-class Fast:
+class Buffered:
     """A CasADi function evaluated through its buffer API (about 3 us instead of 30 us a
-    call from Python). Returns fresh numpy arrays: vectors 1-D, matrices 2-D."""
+    call from Python): the one way the package evaluates its compiled functions.
+
+    Two uses: ``f(*args)`` copies the arguments in and returns fresh numpy arrays (vectors
+    1-D, matrices 2-D); for hot callbacks, :meth:`bind` and :meth:`bind_out` point the
+    function at caller-owned arrays once and :meth:`eval` runs it without any copy.
+    """
 
     def __init__(self, fn: ca.Function):
         self.fn = fn
-        self.buf, self.call = fn.buffer()
+        self.buf, self._call = fn.buffer()
         self.args = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
         for i, a in enumerate(self.args):
             self.buf.set_arg(i, memoryview(a))
@@ -73,16 +78,50 @@ class Fast:
             if fn.nnz_out(i) != self.shapes[i][0] * self.shapes[i][1]:
                 raise ValueError(f"output {i} of {fn.name()} must be dense")
 
+    def bind(self, i: int, arr: np.ndarray) -> None:
+        """Read input ``i`` straight from ``arr`` (contiguous float64, kept alive by the
+        caller) at every :meth:`eval`."""
+        self.args[i] = arr
+        self.buf.set_arg(i, memoryview(arr))
+
+    def bind_out(self, i: int, arr: np.ndarray) -> None:
+        """Write output ``i`` straight into ``arr`` (column-major order) at :meth:`eval`."""
+        self.outs[i] = arr
+        self.buf.set_res(i, memoryview(arr))
+
+    def eval(self) -> None:
+        """Evaluate with the bound arrays."""
+        self._call()
+
     def __call__(self, *args) -> list[np.ndarray]:
         for a, x in zip(self.args, args, strict=True):
             if np.ndim(x) > 1:
                 a[:] = np.ravel(x, order="F")  # CasADi is column-major
             else:
                 a[:] = x
-        self.call()
+        self._call()
         # CasADi stores column-major: a (r, c) matrix is the transpose of a (c, r) C-array
         return [o.reshape(c, r).T.copy() if c > 1 else o.copy()
                 for o, (r, c) in zip(self.outs, self.shapes, strict=True)]
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """Constraint values at (q, t): ``phi`` (m,), ``Phi_q`` (m, nq), ``Phi_t`` (m,)."""
+
+    phi: np.ndarray
+    Phi_q: np.ndarray
+    Phi_t: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointCoords:
+    """Joint coordinates ``c`` (nj,) in rad or m, their rates ``cdot`` (nj,) and the
+    Jacobian ``c_q`` (nj, nq), in the order of ``Model.joint_names``."""
+
+    c: np.ndarray
+    cdot: np.ndarray
+    c_q: np.ndarray
 
 
 def compile_functions(funcs: list[ca.Function]) -> list[ca.Function] | None:
@@ -251,18 +290,21 @@ class Model:
         self.kkt_fn = ca.Function("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)])
         self.post_fn = ca.Function("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)])
         self.free_fn = ca.Function("free", [p], [dn(free)])
-        # fast single-point evaluations for the step-by-step paths
-        self.phi = Fast(self.phi_fn)
-        self.coord = Fast(self.coord_fn)
-        self.kin = Fast(self.kin_fn)
-        self.kkt_parts = Fast(self.kkt_fn)
-        self.post1 = Fast(self.post_fn)
-        self.free = Fast(self.free_fn)
-        self.cvel = Fast(ca.Function("cvel", [q, v], [dn(c), dn(cdot)]))
-        self.evparts = Fast(ca.Function("evparts", [q, v, t, p],
-                                        [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
+        # single-point evaluations for the step-by-step paths (private: callers use the
+        # named methods below)
+        self._phi = Buffered(self.phi_fn)
+        self._coord = Buffered(self.coord_fn)
+        self._kin = Buffered(self.kin_fn)
+        self._kkt_parts = Buffered(self.kkt_fn)
+        self._post = Buffered(self.post_fn)
+        self._free = Buffered(self.free_fn)
+        self._cvel = Buffered(ca.Function("cvel", [q, v], [dn(c), dn(cdot)]))
+        #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
+        self.event_parts = Buffered(ca.Function(
+            "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
         self._kkt_templates: dict[bytes, np.ndarray] = {}
-        self._maps: dict[tuple[str, int], Fast] = {}
+        self._active: dict[bytes, np.ndarray] = {}
+        self._maps: dict[tuple[str, int], Buffered] = {}
 
         # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
         lam = ca.SX.sym("lam", m)
@@ -287,6 +329,44 @@ class Model:
                 self.res_fn, self.jac_fn = funcs
                 self.compiled = True
 
+    # ------------------------------------------------------------- named interface
+    def free_rows(self, p: np.ndarray) -> np.ndarray:
+        """(m,) 1.0 on the inactive (unlocked) lock rows of configuration ``p``, else 0."""
+        return self._free(p)[0]
+
+    def active_rows(self, p: np.ndarray) -> np.ndarray:
+        """Indices of the constraint rows in force in configuration ``p`` (cached)."""
+        key = p.tobytes()
+        rows = self._active.get(key)
+        if rows is None:
+            rows = self._active[key] = np.flatnonzero(self.free_rows(p) == 0.0)
+        return rows
+
+    def constraints(self, q: np.ndarray, t: float, p: np.ndarray) -> Constraints:
+        """Constraint values, Jacobian and explicit time derivative at (q, t)."""
+        return Constraints(*self._phi(q, t, p))
+
+    def joint_coords(self, q: np.ndarray, v: np.ndarray) -> JointCoords:
+        """Joint coordinates, their rates and their Jacobian at (q, v)."""
+        return JointCoords(*self._coord(q, v))
+
+    def joint_rates(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joint coordinates (nj,) and rates (nj,) only (cheaper than :meth:`joint_coords`)."""
+        c, cd = self._cvel(q, v)
+        return c, cd
+
+    def joint_accelerations(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, t: float
+                            ) -> np.ndarray:
+        """Joint coordinate accelerations (nj,) from body accelerations ``a``."""
+        return self._post(q, v, a, t)[2]
+
+    def kinematics(self, q: np.ndarray, t: float, p: np.ndarray
+                   ) -> tuple[Constraints, np.ndarray, np.ndarray]:
+        """Constraints with the joint coordinates and their Jacobian in one evaluation:
+        (Constraints, c (nj,), c_q (nj, nq))."""
+        phi, Phi_q, Phi_t, c, c_q = self._kin(q, t, p)
+        return Constraints(phi, Phi_q, Phi_t), c, c_q
+
     # ------------------------------------------------------------------ helpers
     def params(self, locked: dict[str, float] | None = None) -> np.ndarray:
         """Parameter vector for a configuration: ``locked`` maps joint -> lock value."""
@@ -302,13 +382,13 @@ class Model:
         """Indices of the rows of one joint, driver or lock."""
         return [i for i, r in enumerate(self.rows) if r.kind == kind and r.name == name]
 
-    def mapped(self, name: str, n: int) -> Fast:
+    def mapped(self, name: str, n: int) -> Buffered:
         """``getattr(self, name)`` mapped over n samples, evaluated through the buffer API
         (converting CasADi matrices to numpy element by element cost more than the
         evaluation); cached, since building a map costs too."""
         key = (name, n)
         if key not in self._maps:
-            self._maps[key] = Fast(getattr(self, name).map(n))
+            self._maps[key] = Buffered(getattr(self, name).map(n))
         return self._maps[key]
 
     def kkt(self, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
@@ -317,7 +397,7 @@ class Model:
 
         ``D`` is 1 on the diagonal of inactive lock rows (their multiplier is 0).
         """
-        Phi_q, Qf, gamma = self.kkt_parts(q, v, t, p)
+        Phi_q, Qf, gamma = self._kkt_parts(q, v, t, p)
         return self.kkt_from(Phi_q, Qf, gamma, p)
 
     def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
@@ -343,5 +423,5 @@ class Model:
         A[:nq, :nq] = np.diag(self.mass)
         A[:nq, nq:] = Phi_q.T
         A[nq:, :nq] = Phi_q
-        A[nq:, nq:] = np.diag(self.free(p)[0])
+        A[nq:, nq:] = np.diag(self.free_rows(p))
         return A

@@ -7,6 +7,7 @@ nothing from CasADi or SUNDIALS leaks out of the package unwrapped.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -15,6 +16,38 @@ if TYPE_CHECKING:  # pragma: no cover
 
 class CmmError(Exception):
     """Base class of every error raised by cmm_dae."""
+
+
+class Status(StrEnum):
+    """How a run ended. The value is a short tag (``Result.status``); the full sentence of
+    the run is ``Result.message``; :data:`STATUS_MESSAGES` explains each code."""
+
+    SUCCESS = "success"
+    DEAD_POINT = "dead point"
+    LOCK_UP = "lock-up"
+    STALLED = "stalled"
+    MAX_EVENTS = "max_events"
+    INTERRUPTED = "interrupted"
+    INTEGRATOR = "integrator failure"
+    NUMERICAL = "numerical failure"
+
+
+#: What each status means, for reports and ``cmm-dae`` messages.
+STATUS_MESSAGES: dict[Status, str] = {
+    Status.SUCCESS: "the run reached its end time",
+    Status.DEAD_POINT: "the drivers cannot carry the mechanism through a position where its "
+                       "constraints become dependent",
+    Status.LOCK_UP: "a new lock leaves the drivers no freedom: a stop would have to stop a "
+                    "driver",
+    Status.STALLED: "the run-wide step budget (max_steps) was spent: tiny steps at a grazing "
+                    "contact, a near-singular position or forces too stiff for the tolerances",
+    Status.MAX_EVENTS: "more events than max_events",
+    Status.INTERRUPTED: "interrupted by the user (Ctrl-C)",
+    Status.INTEGRATOR: "the integrator could not continue (tolerances too tight or forces "
+                       "too stiff)",
+    Status.NUMERICAL: "a numerical failure inside the run (a singular linear system, an "
+                      "overflow or a non-finite value)",
+}
 
 
 @dataclass(frozen=True)
@@ -79,6 +112,8 @@ class SolverError(CmmError):
 
     Attributes
     ----------
+    status : Status
+        What kind of failure (see :data:`STATUS_MESSAGES`).
     result : Result
         Everything computed up to the failure (``result.t[-1]`` is the last
         time reached).
@@ -88,8 +123,10 @@ class SolverError(CmmError):
         The last event before the failure.
     """
 
-    def __init__(self, message: str, *, result: Result | None = None,
-                 configuration: Any = None, last_event: Event | None = None):
+    def __init__(self, message: str, *, status: Status = Status.INTEGRATOR,
+                 result: Result | None = None, configuration: Any = None,
+                 last_event: Event | None = None):
+        self.status = Status(status)
         self.result = result
         self.configuration = configuration
         self.last_event = last_event

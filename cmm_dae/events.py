@@ -1,133 +1,236 @@
-"""Hybrid logic shared by both integrators: configurations, impact map, lock and release.
+"""The one event policy of both integrators: configurations, crossings, impact map, lock,
+release, jams and the Zeno rule.
 
-A configuration is the set of locked metamorphic joints. This module decides what happens
-at a limit (impact map, bounce or lock, Zeno guard, immediate release when the stop would
-have to pull) and at a release, and keeps the registry of configurations with the paper's
-labels. It knows the equations (:class:`Model`) but not the integrator.
+A configuration is the set of locked metamorphic joints (joint -> side). An integrator only
+*detects* a trigger — IDA by locating a root of :func:`event_values`, the fixed-step
+algorithm by :func:`crossings` at the end of a step — and hands it to :func:`handle`, which
+decides what happens and returns the transitions (event, state after it). Nothing here knows
+which integrator asked, except through :class:`Policy.resolution`, the shortest time between
+two events that the integrator can tell apart.
+
+Lock sets are values: a trial set (is this new lock a jam?) is an argument of the function
+that asks, never an edit of the shared state undone afterwards.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .equations import Model
-from .errors import SolverError
+from .errors import SolverError, Status
 from .result import Configuration, Event
+
+#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
+#: also the shortest time between a "stay locked" decision and a release of the same joint.
+ZENO_DT = 1e-9
+
+Locked = Mapping[str, str]
 
 
 class LockUpError(SolverError):
     """A new lock leaves the drivers no freedom: the mechanism locks up."""
 
-#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s.
-ZENO_DT = 1e-9
+    def __init__(self, message: str):
+        super().__init__(message, status=Status.LOCK_UP)
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """What an integrator detected: ``kind`` ``"gap"`` (an unlocked joint reached its
+    ``side`` limit) or ``"push"`` (the stop of a locked joint would have to pull)."""
+
+    joint: str
+    side: str
+    kind: str
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Options of the event policy.
+
+    v_lock : float
+        A rebound slower than this (rad/s or m/s) locks the joint.
+    resolution : float
+        Shortest time between two events the integrator resolves, s: :data:`ZENO_DT` for
+        IDA, the step for the fixed-step algorithm. Bounces that accumulate (Zeno) come to
+        rest when they reach it (see :func:`zeno`).
+    """
+
+    v_lock: float = 1e-6
+    resolution: float = ZENO_DT
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One event and the state (positions m/rad, velocities) right after it."""
+
+    event: Event
+    q: np.ndarray
+    v: np.ndarray
+
+
+def _key(locked: Locked) -> tuple:
+    return tuple(sorted(locked.items()))
 
 
 @dataclass
 class HybridState:
-    """The locked joints (joint -> side) and the registry of configurations met so far."""
+    """The locked joints now, the registry of configurations met so far and the memory the
+    policy needs across events (last bounce of each joint, "stayed locked" decisions)."""
 
     model: Model
-    labeller: object = None  # callable(locked: dict[str, str]) -> (label, dof)
+    labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
     locked: dict[str, str] = field(default_factory=dict)
     force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
     configurations: list[Configuration] = field(default_factory=list)
     params: list[np.ndarray] = field(default_factory=list)
+    bounces: dict[str, list[float]] = field(default_factory=dict)  # joint -> bounce times
+    stayed: dict[str, float] = field(default_factory=dict)
     _index: dict[tuple, int] = field(default_factory=dict)
+    _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
 
     def limit_value(self, joint: str, side: str) -> float:
         lim = self.model.mech.joints[joint].limits
         return lim.lower if side == "lower" else lim.upper
 
-    def current(self) -> int:
-        """Index of the configuration of the current locked set (registered on first use)."""
-        key = tuple(sorted(self.locked.items()))
+    def params_of(self, locked: Locked) -> np.ndarray:
+        """Parameter vector of any lock set (cached; a trial set is not registered)."""
+        key = _key(locked)
+        p = self._trial.get(key)
+        if p is None:
+            p = self._trial[key] = self.model.params(
+                {j: self.limit_value(j, s) for j, s in locked.items()})
+        return p
+
+    def index_of(self, locked: Locked) -> int:
+        """Index of the configuration of ``locked`` (registered, labelled, on first use)."""
+        key = _key(locked)
         if key not in self._index:
             locked = dict(key)
             label, dof = self.labeller(locked) if self.labeller else ("", 0)
             self._index[key] = len(self.configurations)
             self.configurations.append(Configuration(
                 tuple(locked), tuple(locked.values()), dof, label))
-            self.params.append(self.model.params(
-                {j: self.limit_value(j, s) for j, s in locked.items()}))
+            self.params.append(self.params_of(locked))
         return self._index[key]
+
+    def current(self) -> int:
+        """Index of the configuration in force."""
+        return self.index_of(self.locked)
 
     @property
     def p(self) -> np.ndarray:
-        return self.params[self.current()]
+        return self.params_of(self.locked)
 
-    def push(self, lam: np.ndarray, joint: str) -> float:
+    def push(self, lam: np.ndarray, joint: str, locked: Locked | None = None) -> float:
         """Force/torque with which the stop of a locked joint pushes it (>= 0 while held).
 
         The lock row is ``c - L``; the generalized force on the second body along the joint
         is ``-lambda``, which the lower stop must give positive and the upper stop negative.
         """
+        side = (self.locked if locked is None else locked)[joint]
         k = self.model.n_fixed + self.model.locks.index(joint)
-        return -lam[k] if self.locked[joint] == "lower" else lam[k]
+        return -lam[k] if side == "lower" else lam[k]
+
+    def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                   locked: Locked | None = None) -> float:
+        """:meth:`push` from a KKT solve at (q, v, t) in configuration ``locked``."""
+        locked = self.locked if locked is None else locked
+        _, lam, _ = self.model.kkt(q, v, t, self.params_of(locked))
+        return self.push(lam, joint, locked)
 
 
-def event_values(hs: HybridState, c: np.ndarray, lam: np.ndarray | None,
-                 events: list[tuple[str, str, str]] | None = None,
-                 cdot: np.ndarray | None = None) -> np.ndarray:
-    """Values of the event functions of the current configuration (see :func:`event_list`;
-    pass that list as ``events`` to save building it at every call).
-
-    With the coordinate rates ``cdot`` a gap is armed only while its joint approaches the
-    stop (+1 while it moves away): just after a release or a rejected root the joint leaves
-    at almost zero speed and round-off in the gap would otherwise read as arrivals, one
-    restart after the other. The jump to +1 is never a downward crossing."""
+# ------------------------------------------------------------------- detection
+def event_list(model: Model, locked: Locked) -> list[Trigger]:
+    """The triggers watched in configuration ``locked``: a ``gap`` for each open limit side
+    of an unlocked joint, a ``push`` for each locked joint. All cross zero downwards."""
     out = []
-    for joint, side, kind in events if events is not None else event_list(hs):
-        if kind == "gap":
-            L = hs.limit_value(joint, side)
-            k = hs.model.jidx[joint]
-            away = cdot is not None and (cdot[k] > 0.0 if side == "lower" else cdot[k] < 0.0)
-            out.append(1.0 if away else (c[k] - L if side == "lower" else L - c[k]))
-        else:
-            out.append(hs.push(lam, joint))
-    return np.array(out)
-
-
-def event_list(hs: HybridState) -> list[tuple[str, str, str]]:
-    """(joint, side, kind) of each event function: ``gap`` for each open limit side of an
-    unlocked joint, ``push`` for each locked joint. All cross zero downwards."""
-    out = []
-    for name in hs.model.locks:
-        if name in hs.locked:
-            out.append((name, hs.locked[name], "push"))
+    for name in model.locks:
+        if name in locked:
+            out.append(Trigger(name, locked[name], "push"))
             continue
-        lim = hs.model.mech.joints[name].limits
+        lim = model.mech.joints[name].limits
         if lim.lower is not None:
-            out.append((name, "lower", "gap"))
+            out.append(Trigger(name, "lower", "gap"))
         if lim.upper is not None:
-            out.append((name, "upper", "gap"))
+            out.append(Trigger(name, "upper", "gap"))
     return out
 
 
+def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarray | None,
+                 triggers: list[Trigger], out: np.ndarray) -> None:
+    """Values of the event functions of ``triggers`` (see :func:`event_list`) into ``out``.
+
+    A gap is armed only while its joint approaches the stop (+1 while it moves away): just
+    after a release or a rejected root the joint leaves at almost zero speed and round-off
+    in the gap would otherwise read as arrivals, one restart after the other. The jump to
+    +1 is never a downward crossing. A push needs the multipliers ``lam`` of a KKT solve."""
+    jidx = hs.model.jidx
+    for i, tr in enumerate(triggers):
+        if tr.kind == "gap":
+            k = jidx[tr.joint]
+            L = hs.limit_value(tr.joint, tr.side)
+            if tr.side == "lower":
+                out[i] = 1.0 if cdot[k] > 0.0 else c[k] - L
+            else:
+                out[i] = 1.0 if cdot[k] < 0.0 else L - c[k]
+        else:
+            out[i] = hs.push(lam, tr.joint)
+
+
+def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[Trigger]:
+    """Triggers crossed at a state reached by a finite step (the fixed-step algorithm):
+    a joint beyond its stop while moving toward it, a locked joint whose stop would pull.
+    A joint that stayed locked at this very instant is not reported again."""
+    model = hs.model
+    triggers = event_list(model, hs.locked)
+    if not triggers:
+        return []
+    c, cd = model.joint_rates(q, v)
+    lam = None
+    out = []
+    for tr in triggers:
+        k = model.jidx[tr.joint]
+        if tr.kind == "gap":
+            L = hs.limit_value(tr.joint, tr.side)
+            beyond = (L - c[k]) if tr.side == "lower" else (c[k] - L)
+            toward = (cd[k] <= 0.0) if tr.side == "lower" else (cd[k] >= 0.0)
+            # round-off leaves a just-released joint a hair beyond its stop: not a crossing
+            if beyond > 1e-12 * (1.0 + abs(L)) and toward:
+                out.append(tr)
+        elif hs.stayed.get(tr.joint) != t:
+            if lam is None:
+                lam = model.kkt(q, v, t, hs.p)[1]
+            if hs.push(lam, tr.joint) < 0.0:
+                out.append(tr)
+    return out
+
+
+# ------------------------------------------------------------------- geometry
 def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> np.ndarray:
     """Minimal-norm Newton projection of q onto the active position constraints."""
-    free = model.free(p)[0]
-    act = np.flatnonzero(free == 0.0)
+    act = model.active_rows(p)
     for _ in range(10):
-        phi, Phi_q, _ = model.phi(q, t, p)
-        r = np.asarray(phi).ravel()[act]
+        con = model.constraints(q, t, p)
+        r = con.phi[act]
         if np.max(np.abs(r), initial=0.0) < 1e-15:
             break
-        J = np.asarray(Phi_q)[act]
         # least squares: a new lock may make the rows dependent until a jam is resolved
-        q = q - np.linalg.lstsq(J, r, rcond=None)[0]
+        q = q - np.linalg.lstsq(con.Phi_q[act], r, rcond=None)[0]
     return q
 
 
 def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
                        ) -> np.ndarray:
     """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows)."""
-    free = model.free(p)[0]
-    act = np.flatnonzero(free == 0.0)
-    _, Phi_q, Phi_t = model.phi(q, t, p)
-    J = np.asarray(Phi_q)[act]
-    r = J @ v + np.asarray(Phi_t).ravel()[act]
+    act = model.active_rows(p)
+    con = model.constraints(q, t, p)
+    J = con.Phi_q[act]
+    r = J @ v + con.Phi_t[act]
     return v - np.linalg.lstsq(J, r, rcond=None)[0]
 
 
@@ -139,39 +242,20 @@ def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarr
     prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
     Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
     """
-    _, Phi_q, h0 = model.phi(q, t, p)
-    Phi_q = np.asarray(Phi_q)
-    b = -np.asarray(h0).ravel()  # -Phi_t: drivers keep their velocity, locks keep 0
-    free = model.free(p)[0]
-    b[free != 0.0] = 0.0
+    con = model.constraints(q, t, p)
+    b = -con.Phi_t  # drivers keep their velocity, locks keep 0
+    b[model.free_rows(p) != 0.0] = 0.0
     if lock_row is not None:
         b[lock_row] = target
-    A = model.kkt_matrix(Phi_q, p)
-    rhs = np.concatenate([model.mass * v, b])
-    sol = np.linalg.solve(A, rhs)
+    A = model.kkt_matrix(con.Phi_q, p)
+    sol = np.linalg.solve(A, np.concatenate([model.mass * v, b]))
     return sol[:model.nq], sol[model.nq:]
 
 
-@dataclass
-class LimitOutcome:
-    """What a limit event does: the clamped positions, the new velocities, the event record,
-    whether it locked,
-    and the preloaded locks it released first (``jammed``: their release events)."""
-
-    q: np.ndarray
-    v: np.ndarray
-    event: Event
-    locked: bool
-    released_at_once: bool = False
-    jammed: list[Event] = field(default_factory=list)
-
-
-def _over_constrained(hs: HybridState, q: np.ndarray, t: float) -> bool:
-    """True when the active constraint rows of the current locked set are dependent."""
-    model = hs.model
-    free = model.free(hs.p)[0]
-    act = np.flatnonzero(free == 0.0)
-    J = model.phi(q, t, hs.p)[1][act]
+def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -> bool:
+    """True when the active constraint rows of lock set ``locked`` are dependent at q."""
+    p = hs.params_of(locked)
+    J = hs.model.constraints(q, t, p).Phi_q[hs.model.active_rows(p)]
     s = np.linalg.svd(J, compute_uv=False)
     rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
     return rank < J.shape[0]
@@ -182,9 +266,8 @@ def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     """Constraint rows that (nearly) depend on each other at q: the joints, drivers and
     locks of a dead point or a lock-up. Returns (labels, smallest/largest singular value);
     no labels when the rows are independent."""
-    free = model.free(p)[0]
-    act = np.flatnonzero(free == 0.0)
-    J = model.phi(q, t, p)[1][act]
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
     U, s, _ = np.linalg.svd(J)
     if J.shape[0] > J.shape[1]:
         s = np.concatenate([s, np.zeros(J.shape[0] - J.shape[1])])
@@ -201,85 +284,150 @@ def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     return labels, ratio
 
 
-def release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
-                   side: str, force_held: dict[str, str]) -> list[Event]:
+def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                       locked: Locked) -> float:
+    """Acceleration of a joint coordinate from a KKT solve in configuration ``locked``."""
+    model = hs.model
+    a, _, _ = model.kkt(q, v, t, hs.params_of(locked))
+    return float(model.joint_accelerations(q, v, a, t)[model.jidx[joint]]), \
+        float(np.max(np.abs(a), initial=0.0))
+
+
+# ------------------------------------------------------------------- decisions
+def _joint_rate(model: Model, q: np.ndarray, v: np.ndarray, joint: str) -> float:
+    return float(model.joint_rates(q, v)[1][model.jidx[joint]])
+
+
+def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
+            policy: Policy) -> bool:
+    """Is a detected trigger a real switch? Re-entry guards shared by both integrators.
+
+    A gap is rejected when the joint already moves away from the stop (a round-off root),
+    or when it arrives at (almost) zero speed and the stop would not push (the joint is
+    leaving); a push is rejected when the joint is no longer locked, a gap when it is
+    locked already (an earlier event of the same instant changed it)."""
+    if tr.kind == "push":
+        return hs.locked.get(tr.joint) == tr.side
+    if tr.joint in hs.locked:
+        return False
+    cdv = _joint_rate(hs.model, q, v, tr.joint)
+    if (cdv >= 0.0 and tr.side == "lower") or (cdv <= 0.0 and tr.side == "upper"):
+        return False
+    if abs(cdv) <= policy.v_lock:
+        trial = {**hs.locked, tr.joint: tr.side}
+        q_on = project_positions(hs.model, q, t, hs.params_of(trial))
+        return hs.lock_force(q_on, v, t, tr.joint, trial) > 0.0
+    return True
+
+
+def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
+           policy: Policy) -> list[Transition]:
+    """Decide what a trigger does and apply it to ``hs``; returns the transitions in order
+    (none when the trigger is rejected or the joint stays locked)."""
+    if not confirm(hs, tr, q, v, t, policy):
+        return []
+    if tr.kind == "gap":
+        return at_limit(hs, q, v, t, tr.joint, tr.side, policy)
+    if would_reenter(hs, q, v, t, tr.joint, tr.side) and \
+            t - hs.stayed.get(tr.joint, -math.inf) > ZENO_DT:
+        hs.stayed[tr.joint] = t  # stays locked: no chattering
+        return []
+    force = hs.lock_force(q, v, t, tr.joint)
+    return [Transition(release(hs, q, v, t, tr.joint, force), q, v)]
+
+
+def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                    side: str) -> list[Transition]:
     """Before ``joint`` locks: if the lock would over-constrain (jam) the mechanism, the
     impact frees locks that it depends on: first joints held on their stops by a preloaded
     spring (force constraints: the impact beats the preload), then other locks (the impact
     pulls them off their stops). One release event each, with the lock force just before."""
-    out: list[Event] = []
-    trial = dict(hs.locked)
-    saved = hs.locked
-    hs.locked = dict(trial, **{joint: side})
-    jam = _over_constrained(hs, q, t)
-    hs.locked = saved
-    if not jam:
+    out: list[Transition] = []
+    if not over_constrained(hs, {**hs.locked, joint: side}, q, t):
         return out
-    order = sorted(saved.items(), key=lambda kv: force_held.get(kv[0]) != kv[1])
+    order = sorted(hs.locked.items(), key=lambda kv: hs.force_held.get(kv[0]) != kv[1])
     for other, _ in order:
-        _, lam, _ = hs.model.kkt(q, v, t, hs.p)
-        force = hs.push(lam, other)
-        out.append(release(hs, q, v, t, other, force))
-        hs.locked = dict(hs.locked, **{joint: side})
-        still = _over_constrained(hs, q, t)
-        del hs.locked[joint]
-        if not still:
+        force = hs.lock_force(q, v, t, other)
+        out.append(Transition(release(hs, q, v, t, other, force), q, v))
+        if not over_constrained(hs, {**hs.locked, joint: side}, q, t):
             break
     return out
 
 
+def zeno(times: list[float], t: float, e: float, resolution: float) -> bool:
+    """Have the bounces of a joint (at ``times``, now ``t``) reached the integrator's time
+    resolution? Then the joint locks instead of bouncing on.
+
+    Under a steady load the intervals between bounces shrink by the restitution ``e`` each
+    time and sum to a finite rest time (Zeno). Two rules end them:
+
+    * a bounce closer than ``resolution`` to the previous one;
+    * an interval that no longer shrinks (above ``(1 + e) / 2`` of the previous one) while
+      within ``2 / (1 - e) + 4`` resolutions: a fixed-step explicit scheme catches each
+      crossing up to a step late, gains about ``a dt`` of speed per bounce and settles into
+      a cycle of about ``2 e / (1 - e) + 2`` steps instead of coming to rest. Locking there
+      leaves O(resolution) of the exact accumulation time, so the rest time converges as
+      the step shrinks.
+    """
+    if not times:
+        return False
+    gap = t - times[-1]
+    if gap < resolution:
+        return True
+    if len(times) < 2 or e >= 1.0:
+        return False
+    prev = times[-1] - times[-2]
+    return gap <= (2.0 / (1.0 - e) + 4.0) * resolution and gap > 0.5 * (1.0 + e) * prev
+
+
 def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str, side: str,
-             v_lock: float, last_bounce: float | None) -> LimitOutcome:
+             policy: Policy) -> list[Transition]:
     """Apply the impact map when ``joint`` reaches its ``side`` limit at time t.
 
     ``q`` is put exactly on the stop here (after any jammed lock is freed, so that the
-    constraint set is consistent). Plastic impact, a rebound slower than ``v_lock`` or a
-    bounce closer than :data:`ZENO_DT` to the previous one locks the joint; a lock whose
-    force is already of the wrong sign releases at once (two events).
+    constraint set is consistent). Plastic impact, a rebound slower than ``v_lock``, a
+    bounce closer than ``resolution`` to the previous one, or a rebound whose flight back
+    would be shorter than ``resolution`` locks the joint; a lock whose force is already of
+    the wrong sign releases at once (two events).
     """
     model = hs.model
-    k = model.jidx[joint]
-    jammed = release_jammed(hs, q, v, t, joint, side, hs.force_held)
-    hs.locked[joint] = side
-    if _over_constrained(hs, q, t):
-        labels, _ = dependent_rows(model, q, t, hs.p, tol=1e-9)
-        del hs.locked[joint]
+    out = _release_jammed(hs, q, v, t, joint, side)
+    target = {**hs.locked, joint: side}
+    if over_constrained(hs, target, q, t):
+        labels, _ = dependent_rows(model, q, t, hs.params_of(target), tol=1e-9)
         drivers = ", ".join(f"driver {d}" for d in model.driver_names) or "no driver"
         raise LockUpError(
             f"lock-up at t = {t:.9g} s: with joint {joint} locked on its {side} stop the "
             f"constraints of {', '.join(labels)} cannot all hold; the mechanism has no freedom "
             f"left for its drivers ({drivers}): the stop would have to stop a driver")
-    q = project_positions(model, q, t, hs.p)  # clamp onto the stop
-    del hs.locked[joint]
+    p_locked = hs.params_of(target)
+    q = project_positions(model, q, t, p_locked)  # clamp onto the stop
     before = hs.current()
-    _, cd_minus, _ = model.coord(q, v)
-    cdm = float(np.asarray(cd_minus).ravel()[k])
+    cdm = _joint_rate(model, q, v, joint)
     e = model.mech.joints[joint].restitution
     T_minus = 0.5 * np.sum(model.mass * v**2)
-
-    hs.locked[joint] = side
-    p_locked = hs.p
     row = model.n_fixed + model.locks.index(joint)
-    zeno = last_bounce is not None and t - last_bounce < ZENO_DT
     v_plus, imp = impact_map(model, q, v, t, p_locked, row, -e * cdm)
     cdp = -e * cdm
-    bounce = e > 0 and abs(cdp) > v_lock and not zeno
+    bounce = e > 0 and abs(cdp) > policy.v_lock and \
+        not zeno(hs.bounces.get(joint, []), t, e, policy.resolution)
     if not bounce:
         v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
         cdp = 0.0
+        hs.locked = target
+        hs.bounces.pop(joint, None)
+    else:
+        hs.bounces.setdefault(joint, []).append(t)
     impulses = {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
                 if x != 0.0}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
-    kind = "bounce" if bounce else ("lock" if abs(cdm) <= v_lock else "limit")
-    if bounce:
-        del hs.locked[joint]
-    after = hs.current()
-    ev = Event(t, kind, joint, side, before, after, cdm, cdp, impulses, lost)
-    out = LimitOutcome(q, v_plus, ev, not bounce, jammed=jammed)
+    kind = "bounce" if bounce else ("lock" if abs(cdm) <= policy.v_lock else "limit")
+    out.append(Transition(Event(t, kind, joint, side, before, hs.current(), cdm, cdp,
+                                impulses, lost), q, v_plus))
     if not bounce:
-        _, lam, _ = model.kkt(q, v_plus, t, hs.p)
-        if hs.push(lam, joint) < 0.0:
-            out.released_at_once = True
+        force = hs.lock_force(q, v_plus, t, joint)
+        if force < 0.0:  # the stop would have to pull at once: no chattering
+            out.append(Transition(release(hs, q, v_plus, t, joint, force), q, v_plus))
     return out
 
 
@@ -287,12 +435,12 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
             force: float) -> Event:
     """Unlock ``joint`` at time t; the event carries the lock force at release."""
     before = hs.current()
-    side = hs.locked.pop(joint)
-    after = hs.current()
-    k = hs.model.jidx[joint]
-    _, cd, _ = hs.model.coord(q, v)
-    cdv = float(np.asarray(cd).ravel()[k])
-    return Event(t, "release", joint, side, before, after, cdv, cdv, {}, 0.0, float(force))
+    locked = dict(hs.locked)
+    side = locked.pop(joint)
+    hs.locked = locked
+    cdv = _joint_rate(hs.model, q, v, joint)
+    return Event(t, "release", joint, side, before, hs.current(), cdv, cdv, {}, 0.0,
+                 float(force))
 
 
 def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -303,9 +451,7 @@ def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     only an acceleration into the stop above round-off level (relative to the bodies'
     accelerations) counts; a single lock can never re-enter (complementarity).
     """
-    model = hs.model
-    a, _, _ = model.kkt(q, v, t, hs.p)
-    _, _, cdd, _ = model.post1(q, v, a, t)
-    acc = float(np.asarray(cdd).ravel()[model.jidx[joint]])
+    free = {j: s for j, s in hs.locked.items() if j != joint}
+    acc, amax = joint_acceleration(hs, q, v, t, joint, free)
     into = -acc if side == "lower" else acc
-    return into > 1e-9 * (1.0 + float(np.max(np.abs(a))))
+    return into > 1e-9 * (1.0 + amax)

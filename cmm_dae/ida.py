@@ -1,26 +1,29 @@
-"""One IDA integration in one configuration (scikit-sundae): the index-2 (GGL) residual
-and its exact Jacobian through ``casadi.Function.buffer()``, event functions, outputs.
+"""IDA (SUNDIALS, through scikit-sundae) as an :class:`~cmm_dae.integrator.Integrator`.
 
-This is the only module that imports scikit-sundae; the hybrid loop around it is in
-:mod:`cmm_dae.dae`.
+Stabilized index-2 (Gear-Gupta-Leimkuhler) form, ``y = [q, v, lambda, mu]``::
+
+    q' - v + Phi_q^T mu = 0,   M v' + Phi_q^T lambda - Q = 0,   Phi = 0,   Phi_q v + Phi_t = 0
+
+with the residual and its exact Jacobian ``dF/dy + cj dF/dy'`` evaluated through CasADi's
+buffer API straight into scikit-sundae's arrays. Each call of :meth:`IdaIntegrator.advance`
+is one IDA segment in one configuration, ended by the root of an event function of
+:mod:`cmm_dae.events` or by the end time.
+
+This is the only module that imports scikit-sundae.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 import sksundae as sun
 
 from . import events as ev
-from .equations import Model
-from .errors import CmmError, SolverError
+from .equations import Buffered, Model
+from .errors import CmmError, SolverError, Status
+from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .result import Stats
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .dae import Options, _Recorder
-
 
 #: Absolute tolerances on the multipliers. Both are index-2 variables of the GGL form and
 #: scikit-sundae cannot suppress them from the error test. mu (zero on the exact solution)
@@ -33,22 +36,7 @@ ATOL_LAMBDA = 1e-2
 ATOL_MU = 1e3
 
 
-class _Buffered:
-    """A CasADi function evaluated through its buffer API into fixed numpy arrays."""
-
-    def __init__(self, fn, inputs: list[np.ndarray], output: np.ndarray | None = None):
-        self.buf, self.call = fn.buffer()
-        self.inputs = inputs
-        for i, arr in enumerate(inputs):
-            self.buf.set_arg(i, memoryview(arr))
-        self.out = output if output is not None else np.zeros(fn.nnz_out(0))
-        self.buf.set_res(0, memoryview(self.out))
-
-    def set(self, i: int, arr: np.ndarray) -> None:
-        self.buf.set_arg(i, memoryview(arr))
-
-
-def _output_times(opts: Options, t0: float) -> np.ndarray:
+def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
     if opts.output_dt is None:
         return np.array([opts.t_end])
     n = int(math.floor(opts.t_end / opts.output_dt + 1e-9))
@@ -63,47 +51,54 @@ class _StalledError(Exception):
     """Raised inside the root function when the run's step budget is spent."""
 
 
-class _Segment:
-    """One IDA integration in one configuration, until t_end or the first event."""
+class IdaIntegrator(Integrator):
+    """IDA on the GGL index-2 residual, one solver per configuration segment."""
 
-    def __init__(self, model: Model, hs: ev.HybridState, opts: Options):
-        self.model, self.hs, self.opts = model, hs, opts
-        self.p = hs.p.copy()
-        N, nq = model.N, model.nq
-        self.events = ev.event_list(hs)
-        self.has_push = any(kind == "push" for _, _, kind in self.events)
+    method = "ida"
+
+    def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
+        super().__init__(model, hs, opts, stats)
+        self.policy = ev.Policy(opts.v_lock, resolution=ev.ZENO_DT)
+        nq = model.nq
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)
-        dummy = np.zeros(N)
-        self.res = _Buffered(model.res_fn, [self.t_arr, dummy, dummy, self.p])
-        self.jac_out = None
+        self.p = np.zeros(2 * len(model.locks))
+        self.res = Buffered(model.res_fn)
+        self.res.bind(0, self.t_arr)
+        self.res.bind(3, self.p)
+        self.jac: Buffered | None = None
         self.atol = np.concatenate([np.full(2 * nq, opts.atol), np.full(model.m, ATOL_LAMBDA),
                                     np.full(model.m, ATOL_MU)])
-        self.n_steps = 0
-        self.t_last = -math.inf
-        self.outputs: set[float] = set()
-        self.interrupted = False
-        self.stalled = False
-        self.step_budget = opts.max_steps
+        self.ev_out = np.zeros(0)
+        self.triggers: list[ev.Trigger] = []
+        self.first_step = 0.0
+        # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
+        # jump in the prescribed acceleration, so the run restarts there.
+        self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
+                              if d.motion == "table" and 0.0 < d.times[-1] < opts.t_end})
 
-    def resfn(self, t, y, yp, res):
+    # ------------------------------------------------------------- callbacks
+    def _residual(self, t, y, yp, res):
         self.t_arr[0] = t
-        self.res.set(1, y)
-        self.res.set(2, yp)
-        self.res.call()
-        res[:] = self.res.out
+        self.res.bind(1, y)
+        self.res.bind(2, yp)
+        self.res.bind_out(0, res)
+        self.res.eval()
 
-    def jacfn(self, t, y, yp, res, cj, JJ):
-        if self.jac_out is None or self.jac_out.out is not JJ:
-            self.jac_out = _Buffered(self.model.jac_fn, [self.t_arr, y, yp, self.cj_arr, self.p],
-                                     output=JJ)
+    def _jacobian(self, t, y, yp, res, cj, JJ):
+        if self.jac is None:
+            self.jac = Buffered(self.model.jac_fn)
+            self.jac.bind(0, self.t_arr)
+            self.jac.bind(3, self.cj_arr)
+            self.jac.bind(4, self.p)
         self.t_arr[0] = t
         self.cj_arr[0] = cj
-        self.jac_out.set(1, y)
-        self.jac_out.set(2, yp)
-        self.jac_out.call()
+        self.jac.bind(1, y)
+        self.jac.bind(2, yp)
+        self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
+        self.jac.eval()
 
-    def eventsfn(self, t, y, yp, out):
+    def _events(self, t, y, yp, out):
         # IDA checks the roots after every successful step (at the step's end, or at the
         # output time when the step passed it): count steps here.
         if t > self.t_last and t not in self.outputs:
@@ -112,22 +107,41 @@ class _Segment:
             if self.n_steps > self.step_budget:
                 raise _StalledError
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
-        if not self.events:
+        if not self.triggers:
             return
         model = self.model
         nq = model.nq
         q, v = y[:nq], y[nq:2 * nq]
         if self.has_push:  # lock forces by a KKT solve at (q, v, t), never IDA's lambda
-            c, cd, Phi_q, Qf, gamma = model.evparts(q, v, t, self.p)
+            c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, self.p)
             _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, self.p)
         else:
-            (c, cd), lam = model.cvel(q, v), None
-        out[1:] = ev.event_values(self.hs, c, lam, self.events, cd)
+            (c, cd), lam = model.joint_rates(q, v), None
+        ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out)
+        out[1:] = self.ev_out
 
-    def run(self, t0: float, q: np.ndarray, v: np.ndarray, rec: _Recorder, first_step: float,
-            stats: Stats, t_stop: float | None = None):
-        model, opts = self.model, self.opts
+    # ------------------------------------------------------------------ segment
+    def after_events(self, transitions: list[ev.Transition]) -> None:
+        last = transitions[-1].event if transitions else None
+        if last is not None and last.kind == "bounce":
+            c = float(self.model.joint_rates(transitions[-1].q, transitions[-1].v)[0]
+                      [self.model.jidx[last.joint]])
+            # A first step long enough that round-off in the gap cannot read as a crossing.
+            self.first_step = min(1e-6, 1e3 * np.finfo(float).eps * (1 + abs(c))
+                                  / max(abs(last.velocity_after), 1e-300))
+
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        model, opts, hs = self.model, self.opts, self.hs
         nq = model.nq
+        self.p[:] = hs.p
+        first_step, self.first_step = self.first_step, 0.0
+        self.triggers = ev.event_list(model, hs.locked)
+        self.has_push = any(tr.kind == "push" for tr in self.triggers)
+        self.ev_out = np.zeros(len(self.triggers))
+        self.n_steps = 0
+        self.t_last = -math.inf
+        self.interrupted = self.stalled = False
+        self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
         # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
         q = ev.project_positions(model, q, t0, self.p)
@@ -136,7 +150,7 @@ class _Segment:
         self.ratio0 = ev.dependent_rows(model, q, t0, self.p, tol=1.0)[1]
         y0 = np.concatenate([q, v, lam, np.zeros(model.m)])
         yp0 = np.concatenate([v, a, np.zeros(2 * model.m)])
-        ne = 1 + len(self.events)
+        ne = 1 + len(self.triggers)
 
         # scikit-sundae keeps its event history on the function object: a fresh one per
         # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
@@ -145,7 +159,7 @@ class _Segment:
         # returns what it has and the run stops with everything computed so far.
         def eventsfn(t, y, yp, out):
             try:
-                self.eventsfn(t, y, yp, out)
+                self._events(t, y, yp, out)
             except KeyboardInterrupt:
                 self.interrupted = True
             except _StalledError:
@@ -156,18 +170,18 @@ class _Segment:
 
         def resfn(t, y, yp, res):
             try:
-                self.resfn(t, y, yp, res)
+                self._residual(t, y, yp, res)
             except KeyboardInterrupt:
                 self.interrupted = True
-                self.resfn(t, y, yp, res)
+                self._residual(t, y, yp, res)
 
-        eventsfn.direction = [0] + [-1] * len(self.events)
+        eventsfn.direction = [0] + [-1] * len(self.triggers)
         eventsfn.terminal = [True] * ne
         solver = sun.ida.IDA(
-            resfn, jacfn=self.jacfn, eventsfn=eventsfn, num_events=ne,
+            resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
             rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
             first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)))
-        t_stop = opts.t_end if t_stop is None else t_stop
+        t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
         outs = _output_times(opts, t0)
         if t_stop < opts.t_end:
             outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
@@ -183,36 +197,37 @@ class _Segment:
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
-            raise SolverError(f"the integration failed at t = {self.t_last:.9g} s: {e}") from e
-        self._stats(stats, r)
+            raise SolverError(f"the integration failed at t = {self.t_last:.9g} s: {e}",
+                              status=Status.NUMERICAL) from e
+        self.stats.steps += self.n_steps
+        self.stats.nfev += int(r.nfev)
+        self.stats.njev += int(r.njev)
         T, Y = np.asarray(r.t), np.asarray(r.y)
         keep = np.arange(1, T.size)
         if extra is not None:
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
-        rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], self.hs.current())
+        rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], hs.current())
+        t1, q1, v1 = float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy()
         if r.status < 0:
-            raise SolverError(self._failure_message(r, float(T[-1]), Y[-1, :nq]))
+            message, status = self._failure(r, t1, q1)
+            raise SolverError(message, status=status)
         if r.status == 2 and self.stalled:
             raise SolverError(
-                f"stalled at t = {float(T[-1]):.9g} s: more than {opts.max_steps} IDA steps "
+                f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
                 "in this run (tiny steps: a grazing contact, a near-singular position or "
-                "forces too stiff for the tolerances); raise max_steps to go on")
+                "forces too stiff for the tolerances); raise max_steps to go on",
+                status=Status.STALLED)
         if r.status == 2 and self.interrupted:
             raise KeyboardInterrupt
         if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
             info = np.asarray(r.i_events)[-1]
-            hit = int(np.flatnonzero(info[1:] != 0)[0])
-            return float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), self.events[hit]
+            hit = tuple(self.triggers[i] for i in np.flatnonzero(info[1:] != 0))
+            return SegmentEnd(t1, q1, v1, hit, "event")
         if t_stop < opts.t_end:
-            return float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), None
-        return None
+            return SegmentEnd(t1, q1, v1, (), "restart")
+        return SegmentEnd(t1, q1, v1, (), "end")
 
-    def _stats(self, stats: Stats, r) -> None:
-        stats.steps += self.n_steps
-        stats.nfev += int(r.nfev)
-        stats.njev += int(r.njev)
-
-    def _failure_message(self, r, tt: float, q: np.ndarray) -> str:
+    def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status]:
         cfg = self.hs.configurations[self.hs.current()].label
         # the constraint rows' conditioning at the failure against the segment's start: a
         # dead point shows as a collapse of the smallest singular value (units mix, so
@@ -222,7 +237,9 @@ class _Segment:
             what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")
+            status = Status.DEAD_POINT
         else:
             what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
                     "tolerances may be too tight or the forces too stiff)")
-        return f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})"
+            status = Status.INTEGRATOR
+        return f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})", status

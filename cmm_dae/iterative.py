@@ -8,25 +8,21 @@ At each step ``t_n -> t_n + dt``:
 3. the velocities from the velocity equations;
 4. accelerations, driving efforts and constraint forces from the KKT system.
 
-Limits crossed within a step switch the configuration at the step's end (clamp onto the
-stop and the same impact map as the IDA path); a lock force that changes sign releases the
-joint at the step's end. The Result has the same shape as ``run_dae``'s.
+Limits crossed within a step and lock forces that change sign are triggers at the step's
+end, handed to the same event policy as IDA's (:mod:`cmm_dae.events`: clamp onto the stop,
+impact map, lock, release, Zeno rule with the step as the time resolution). The run driver
+(:func:`cmm_dae.simulate`) makes the same Result of it as of an IDA run.
 """
 
 from __future__ import annotations
 
-import math
-import time
-
 import numpy as np
 
 from . import events as ev
-from .assembly import start_state
 from .equations import Model
-from .errors import CmmError, ModelError, Problem, SolverError
-from .mechanism import Mechanism
-from .post import build_result
-from .result import Event, Result, Stats
+from .errors import SolverError, Status
+from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
+from .result import Stats
 
 
 def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
@@ -34,18 +30,14 @@ def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
     """Choose the differential variables: non-driven, unlocked joint coordinates that span
     the free motion best (column-pivoted QR on their rates over the null space of the
     active constraints), the user's [initial] choice first when it is well conditioned."""
-    free = model.free(hs.p)[0]
-    act = np.flatnonzero(free == 0.0)
-    _, Phi_q, _ = model.phi(q, t, hs.p)
-    J = np.asarray(Phi_q)[act]
+    J = model.constraints(q, t, hs.p).Phi_q[model.active_rows(hs.p)]
     _, s, Vt = np.linalg.svd(J)
     rank = int(np.sum(s > 1e-10 * s[0])) if s.size else 0
     N = Vt[rank:].T  # null space: the free motions
     dof = N.shape[1]
     if dof == 0:
         return []
-    _, _, c_q = model.coord(q, np.zeros(model.nq))
-    C = np.asarray(c_q) @ N
+    C = model.joint_coords(q, np.zeros(model.nq)).c_q @ N
     cand = [n for n in model.joint_names if n not in model.mech.drivers and n not in hs.locked]
     pref = [n for n in prefer if n in cand]
     if len(pref) == dof:
@@ -71,174 +63,91 @@ class _Stepper:
     def __init__(self, model: Model, hs: ev.HybridState, coords: list[str]):
         self.model, self.hs, self.coords = model, hs, coords
         self.kidx = [model.jidx[n] for n in coords]
-        free = model.free(hs.p)[0]
-        self.act = np.flatnonzero(free == 0.0)
+        self.act = model.active_rows(hs.p)
 
     def positions(self, q0: np.ndarray, t: float, targets: np.ndarray) -> np.ndarray:
         model, p = self.model, self.hs.p
         q = q0.copy()
         for _ in range(25):
-            phi, Phi_q, _, c, c_q = model.kin(q, t, p)
-            r = np.concatenate([np.asarray(phi).ravel()[self.act],
-                                np.asarray(c).ravel()[self.kidx] - targets])
+            con, c, c_q = model.kinematics(q, t, p)
+            r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
             if np.max(np.abs(r), initial=0.0) < 1e-13:
                 return q
-            J = np.vstack([np.asarray(Phi_q)[self.act], np.asarray(c_q)[self.kidx]])
+            J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
             q = q - np.linalg.solve(J, r)
-        phi, Phi_q, _, c, c_q = model.kin(q, t, p)
-        r = np.concatenate([np.asarray(phi).ravel()[self.act],
-                            np.asarray(c).ravel()[self.kidx] - targets])
+        con, c, _ = model.kinematics(q, t, p)
+        r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
         if np.max(np.abs(r), initial=0.0) > 1e-9:
             labels, ratio = ev.dependent_rows(model, q0, t, p, tol=1.0)
             raise SolverError(f"dead point near t = {t:.6g} s: the position equations do not "
                               f"converge (residual {np.max(np.abs(r)):.3g}); the constraints "
                               f"of {', '.join(labels)} are nearly dependent at the last "
                               f"position (singular-value ratio {ratio:.1e}): the mechanism "
-                              "cannot follow its driver here")
+                              "cannot follow its driver here", status=Status.DEAD_POINT)
         return q
 
     def velocities(self, q: np.ndarray, t: float, rates: np.ndarray) -> np.ndarray:
         model, p = self.model, self.hs.p
-        _, Phi_q, Phi_t, _, c_q = model.kin(q, t, p)
-        J = np.vstack([np.asarray(Phi_q)[self.act], np.asarray(c_q)[self.kidx]])
-        rhs = np.concatenate([-np.asarray(Phi_t).ravel()[self.act], rates])
+        con, _, c_q = model.kinematics(q, t, p)
+        J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
+        rhs = np.concatenate([-con.Phi_t[self.act], rates])
         return np.linalg.solve(J, rhs)
 
 
-def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
-                  output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
-                  throw: bool = True, model: Model | None = None) -> Result:
-    """The paper's fixed-step iterative algorithm from t = 0 to ``t_end``.
+class IterativeIntegrator(Integrator):
+    """The paper's fixed-step algorithm, step ``dt``, output every ``output_every`` steps."""
 
-    Parameters
-    ----------
-    mech : Mechanism
-    t_end : float
-        End time, s.
-    dt : float
-        Fixed step, s (the paper uses 0.01 s).
-    output_every : int
-        Keep every k-th step in the Result (events are always kept).
-    v_lock : float
-        A rebound slower than this (rad/s or m/s) locks the joint.
-    max_events : int
-        Stop with :class:`SolverError` after this many events.
-    throw : bool
-        Raise on failure (True) or return the partial Result with its ``status``.
-    model : Model or None
-        A prebuilt model of ``mech``.
+    method = "iterative"
 
-    Returns
-    -------
-    Result
-        Same shape as :func:`cmm_dae.run_dae`'s; ``stats.steps`` counts the fixed steps.
-    """
-    problems = []
-    if not (isinstance(t_end, int | float) and math.isfinite(t_end) and t_end > 0):
-        problems.append(Problem("run", "t_end", f"expected a positive end time in s, "
-                                f"got {t_end!r}"))
-    if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
-        problems.append(Problem("run", "dt", f"expected a positive step in s, got {dt!r}"))
-    if not (isinstance(output_every, int) and output_every >= 1):
-        problems.append(Problem("run", "output_every", f"expected an integer >= 1, "
-                                f"got {output_every!r}"))
-    if problems:
-        raise ModelError(problems)
-    wall0 = time.perf_counter()
-    model = model or Model(mech)
-    from .structure import force_constraint_joints, labeller
+    def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
+        super().__init__(model, hs, opts, stats)
+        # The step is the algorithm's time resolution: a rebound that would come back
+        # within one step cannot be followed and locks (the Zeno rule of the policy).
+        self.policy = ev.Policy(opts.v_lock, resolution=opts.dt)
+        mech = model.mech
+        self.prefer = [k for k in mech.initial.joints if k not in mech.drivers]
+        self.n_steps = steps_needed(opts.t_end, opts.dt)
+        self.n = 0  # steps taken so far: the grid is n * dt, never accumulated
+        self.coords: list[str] = []
+        self.key: tuple | None = None
+        self.st: _Stepper | None = None
 
-    stats = Stats(build_time=time.perf_counter() - wall0, method="iterative")
-    hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
-    q, v, events = start_state(model, hs)
-    T, Q, V, C = [0.0], [q], [v], [hs.current()]
-    status, err = "success", None
-    n_steps = int(round(t_end / dt))
-    if abs(n_steps * dt - t_end) > 1e-9 * t_end:
-        n_steps = int(math.ceil(t_end / dt))
-    prefer = [k for k in mech.initial.joints if k not in mech.drivers]
-    try:
-        coords = _free_coordinates(model, hs, q, 0.0, prefer)
-        st = _Stepper(model, hs, coords)
-        a, _, _ = model.kkt(q, v, 0.0, hs.p)
-        t = 0.0
-        for n in range(1, n_steps + 1):
-            t_new = min(n * dt, t_end)
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        model, hs, opts = self.model, self.hs, self.opts
+        key = tuple(sorted(hs.locked.items()))
+        if key != self.key or self.st is None:  # a new configuration: choose its coordinates
+            self.coords = _free_coordinates(model, hs, q, t0, self.coords + self.prefer)
+            self.st = _Stepper(model, hs, self.coords)
+            self.key = key
+        st, k = self.st, self.st.kidx
+        cfg = hs.current()
+        t = t0
+        a, _, _ = model.kkt(q, v, t, hs.p)
+        while self.n < self.n_steps:
+            self.n += 1
+            t_new = min(self.n * opts.dt, opts.t_end)
             h = t_new - t
-            c, cd, cdd, _ = (np.asarray(x).ravel() for x in model.post1(q, v, a, t))
-            k = st.kidx
+            c, cd = model.joint_rates(q, v)
+            cdd = model.joint_accelerations(q, v, a, t)
             targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
             rates = cd[k] + cdd[k] * h
             q = st.positions(q + v * h, t_new, targets)
             v = st.velocities(q, t_new, rates)
             t = t_new
-            stats.steps += 1
-            pre = (t, q, v, hs.current())
-            try:
-                changed = _switch(model, hs, q, v, t, v_lock, events)
-            except CmmError:
-                for lst, x in zip((T, Q, V, C), pre, strict=True):  # keep the last state
-                    lst.append(x)
-                raise
-            if changed:
-                for lst, x in zip((T, Q, V, C), pre, strict=True):  # the pre-event sample
-                    lst.append(x)
-                q, v = changed
-                if len(events) > max_events:
-                    raise SolverError(f"max_events = {max_events} reached at t = {t:.6g} s")
-                coords = _free_coordinates(model, hs, q, t, coords + prefer)
-                st = _Stepper(model, hs, coords)
+            self.stats.steps += 1
+            crossed = ev.crossings(hs, q, v, t)
+            if crossed:
+                rec.add(t, q, v, cfg)  # the sample before the switch
+                return SegmentEnd(t, q, v, tuple(crossed), "event")
             a, _, _ = model.kkt(q, v, t, hs.p)
-            if n % output_every == 0 or n == n_steps or changed:
-                T.append(t)
-                Q.append(q)
-                V.append(v)
-                C.append(hs.current())
-    except (CmmError, np.linalg.LinAlgError, KeyboardInterrupt) as e:
-        status = (f"stopped at t = {T[-1]:.6g} s: {e}" if not isinstance(e, KeyboardInterrupt)
-                  else "interrupted (KeyboardInterrupt)")
-        err = e
-    nq = model.nq
-    res = build_result(model, np.array(T), np.array(Q).reshape(-1, nq),
-                       np.array(V).reshape(-1, nq), np.array(C, int), hs.configurations,
-                       hs.params, events, stats, status)
-    stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
-    if err is not None and (throw or isinstance(err, ModelError)):
-        raise SolverError(status, result=res, configuration=hs.configurations[hs.current()],
-                          last_event=events[-1] if events else None) from err
-    return res
+            if self.n % opts.output_every == 0 or self.n == self.n_steps:
+                rec.add(t, q, v, cfg)
+        return SegmentEnd(t, q, v, (), "end")
 
 
-def _switch(model: Model, hs: ev.HybridState, q: np.ndarray, v: np.ndarray, t: float,
-            v_lock: float, events: list[Event]) -> tuple[np.ndarray, np.ndarray] | None:
-    """Configuration changes at the end of a step: limits crossed (clamp + impact map) and
-    locks whose force changed sign (release). Returns the new (q, v) or None."""
-    changed = False
-    c, cd, _ = (np.asarray(x).ravel() for x in model.coord(q, v))
-    for joint, side, kind in ev.event_list(hs):
-        k = model.jidx[joint]
-        if (kind == "gap") == (joint in hs.locked):
-            continue  # an earlier switch of this step changed this joint already
-        if kind == "gap":
-            L = hs.limit_value(joint, side)
-            beyond = (L - c[k]) if side == "lower" else (c[k] - L)
-            toward = (cd[k] <= 0.0) if side == "lower" else (cd[k] >= 0.0)
-            # round-off leaves a just-released joint a hair beyond its stop: not a crossing
-            if not (beyond > 1e-12 * (1.0 + abs(L)) and toward):
-                continue
-            out = ev.at_limit(hs, q, v, t, joint, side, v_lock, None)  # clamps, impact map
-            q, v = out.q, out.v
-            events.extend(out.jammed)
-            events.append(out.event)
-            if out.released_at_once:
-                _, lam, _ = model.kkt(q, v, t, hs.p)
-                events.append(ev.release(hs, q, v, t, joint, hs.push(lam, joint)))
-            changed = True
-        else:
-            _, lam, _ = model.kkt(q, v, t, hs.p)
-            push = hs.push(lam, joint)
-            if push < 0.0:
-                events.append(ev.release(hs, q, v, t, joint, push))
-                changed = True
-        c, cd, _ = (np.asarray(x).ravel() for x in model.coord(q, v))
-    return (q, v) if changed else None
+def steps_needed(t_end: float, dt: float) -> int:
+    """Number of fixed steps to reach t_end (the last one shortened to land on it)."""
+    n = int(round(t_end / dt))
+    if abs(n * dt - t_end) > 1e-9 * t_end:
+        n = int(np.ceil(t_end / dt))
+    return max(n, 1)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import reprlib
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,8 @@ from .mechanism import (
 )
 
 _REQUIRED = object()
+#: Largest model file read, bytes (a mechanism description is a few kB of text).
+MAX_FILE_BYTES = 16 * 2**20
 
 TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "initial")
 MECH_KEYS = ("name", "gravity")
@@ -52,7 +55,7 @@ class _Reader:
 
     def keys(self, table: str, d: Any, allowed: tuple[str, ...]) -> dict:
         if not isinstance(d, dict):
-            self.bad(table, "", f"expected a table, got {type(d).__name__} {d!r}")
+            self.bad(table, "", f"expected a table, got {type(d).__name__} {_short(d)}")
             return {}
         for k in d:
             if k not in allowed:
@@ -72,7 +75,7 @@ class _Reader:
 
     def _num(self, table: str, key: str, v: Any) -> float:
         if isinstance(v, bool) or not isinstance(v, int | float):
-            self.bad(table, key, f"expected a number, got {type(v).__name__} {v!r}")
+            self.bad(table, key, f"expected a number, got {type(v).__name__} {_short(v)}")
             return math.nan
         if not math.isfinite(v):
             self.bad(table, key, f"expected a finite number, got {v}")
@@ -88,7 +91,7 @@ class _Reader:
             return default
         v = d[key]
         if not isinstance(v, list) or (n is not None and len(v) != n):
-            self.bad(table, key, f"expected a list of {n or 'some'} numbers, got {v!r}")
+            self.bad(table, key, f"expected a list of {n or 'some'} numbers, got {_short(v)}")
             return tuple([math.nan] * (n or 0))
         out = []
         for i, x in enumerate(v):
@@ -103,14 +106,14 @@ class _Reader:
             return default
         v = d[key]
         if not isinstance(v, str):
-            self.bad(table, key, f"expected a string, got {type(v).__name__} {v!r}")
+            self.bad(table, key, f"expected a string, got {type(v).__name__} {_short(v)}")
             return ""
         return v
 
     def sub(self, table: str, d: dict, key: str) -> dict:
         v = d.get(key, {})
         if not isinstance(v, dict):
-            self.bad(table, key, f"expected a table, got {type(v).__name__} {v!r}")
+            self.bad(table, key, f"expected a table, got {type(v).__name__} {_short(v)}")
             return {}
         return v
 
@@ -135,18 +138,48 @@ def load(path: str | Path) -> Mechanism:
     path = Path(path)
     src = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ModelError(Problem("", "", f"the file has {size} bytes; a model file is "
+                                     f"text of at most {MAX_FILE_BYTES} bytes"), src)
+        raw = path.read_bytes()
     except OSError as e:
-        raise ModelError(Problem("", "", f"cannot read the file: {e.strerror}"), src) from None
+        raise ModelError(Problem("", "", f"cannot read the file: {e.strerror or e}"),
+                         src) from None
+    if b"\x00" in raw:
+        raise ModelError(Problem("", "", "this is a binary file, not a TOML model file"),
+                         src)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ModelError(Problem("", "", f"not UTF-8 text (byte {e.start}: "
+                                 f"{raw[e.start:e.start + 1]!r}); save the model file as "
+                                 "UTF-8"), src) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ModelError(Problem("", "", f"TOML syntax error: {e}"), src) from None
+    except RecursionError:
+        raise ModelError(Problem("", "", "arrays or tables nested too deeply to read"),
+                         src) from None
     return from_dict(data, source=src)
 
 
 def from_dict(data: dict, *, source: str | None = None) -> Mechanism:
     """Build a mechanism from the parsed TOML structure (see :func:`load`)."""
+    try:
+        return _from_dict(data, source)
+    except RecursionError:
+        raise ModelError(Problem("", "", "values nested too deeply (a model file holds "
+                                 "numbers, short lists and tables)"), source) from None
+
+
+def _short(v: Any) -> str:
+    """repr of a value, cut short (a huge or deeply nested value must not flood a message)."""
+    return reprlib.repr(v)
+
+
+def _from_dict(data: dict, source: str | None) -> Mechanism:
     r = _Reader()
     r.keys("", data, TOP_KEYS)
     mech = r.keys("mechanism", r.sub("", data, "mechanism"), MECH_KEYS)
@@ -220,7 +253,7 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     if conn is None:
         r.bad(t, "connects", "missing (expected [\"body.point\", \"body.point\"])")
     elif not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str) for c in conn)):
-        r.bad(t, "connects", f"expected two strings \"body.point\", got {conn!r}")
+        r.bad(t, "connects", f"expected two strings \"body.point\", got {_short(conn)}")
     else:
         first, second = conn
     if jtype == "revolute":
@@ -251,7 +284,7 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
 def _driver(r: _Reader, name: str, d: Any) -> Driver:
     t = f"drivers.{name}"
     if not isinstance(d, dict):
-        r.bad(t, "", f"expected a table, got {d!r}")
+        r.bad(t, "", f"expected a table, got {_short(d)}")
         return Driver(name)
     motion = r.string(t, d, "motion")
     if motion not in MOTIONS:

@@ -104,13 +104,11 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
 
 def differences(cmp: Comparison, path: Path) -> Path:
     """Differences a - b of the driving efforts and metamorphic-joint coordinates."""
-    from .report import resample
 
     a, b, t = cmp.a, cmp.b, cmp.t
-    from .report import watched_joints
 
     names = [("driver", n) for n in a.meta["drivers"]] + \
-        [("joint", n) for n in watched_joints(a)]
+        [("joint", n) for n in a.watched_joints()]  # never empty: watched falls back to all
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.6 * max(1, len(names))),
                              squeeze=False, sharex=True)
     for ax, (kind, n) in zip(axes[:, 0], names, strict=True):
@@ -121,7 +119,7 @@ def differences(cmp: Comparison, path: Path) -> Path:
         else:
             ya, yb = a.joint(n).position, b.joint(n).position
             unit, lab = _unit(a, n), f"joint {n} position"
-        d = resample(t, a, ya) - resample(t, b, yb)
+        d = a.resample(t, ya) - b.resample(t, yb)
         ax.plot(t, np.where(cmp.mask, d, np.nan), color="k", lw=1.0)
         _event_lines(ax, a)
         ax.set_ylabel(f"diff [{unit}]")
@@ -137,8 +135,9 @@ def differences(cmp: Comparison, path: Path) -> Path:
 def timeline(results: list[Result], path: Path) -> Path:
     """Configuration bands and events of each result along time."""
     labels: list[str] = []
-    for r in results:
-        for c in r.configurations:
+    for r in results:  # only configurations a run was in: the legend lists nothing else
+        for i in r.entered_configurations():
+            c = r.configurations[i]
             txt = c.label + (f" [{','.join(c.locked)}]" if c.locked else "")
             if txt not in labels:
                 labels.append(txt)
@@ -171,10 +170,11 @@ def timeline(results: list[Result], path: Path) -> Path:
 def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
     """Every figure of a comparison report, written into ``out``."""
     res = [cmp.a, cmp.b]
-    figs = {"Driving effort (paper Figs. 16, 23)": driving_effort(res, out / "driving.png")}
-    from .report import watched_joints
+    figs = {}
+    if cmp.a.meta["drivers"]:  # an undriven mechanism has no driving effort to draw
+        figs["Driving effort (paper Figs. 16, 23)"] = driving_effort(res, out / "driving.png")
 
-    meta = watched_joints(cmp.a)
+    meta = cmp.a.watched_joints()
     if meta:
         figs["Relative motion of the metamorphic joints (paper Fig. 17)"] = joint_motion(
             res, meta, out / "joints.png")
@@ -186,15 +186,18 @@ def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
     return figs
 
 
-def work_precision(rows: list[dict], path: Path, title: str) -> Path:
-    """Error vs wall time, one line per method."""
+def work_precision(rows: list, path: Path, title: str) -> Path:
+    """Error vs wall time, one line per method (rows of a
+    :class:`~cmm_dae.studies.WorkPrecision`; failed or exact runs are left out)."""
     fig, ax = plt.subplots(figsize=(7, 5))
-    for k, method in enumerate(dict.fromkeys(r["method"] for r in rows)):
-        pts = [r for r in rows if r["method"] == method]
-        ax.loglog([p["wall"] for p in pts], [p["error"] for p in pts], "o-",
+    for k, method in enumerate(dict.fromkeys(r.method for r in rows)):
+        pts = [r for r in rows if r.method == method and np.isfinite(r.error) and r.error > 0]
+        if not pts:
+            continue
+        ax.loglog([p.wall for p in pts], [p.error for p in pts], "o-",
                   label=method, color=f"C{k}")
         for p in pts:
-            ax.annotate(p["setting"], (p["wall"], p["error"]), fontsize=7,
+            ax.annotate(p.setting, (p.wall, p.error), fontsize=7,
                         textcoords="offset points", xytext=(4, 4))
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set(xlabel="wall time [s]", ylabel="max driving-effort error [N m]")

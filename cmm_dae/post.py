@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .equations import Model
+from .errors import Status
 from .mechanism import GROUND
 from .result import Configuration, Event, Result, Stats
 
@@ -30,6 +31,8 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     Qf = np.asarray(Qf).T
     gamma = np.asarray(gamma).T
     free = model.mapped("free_fn", n)(P.T)[0].T
+    if m == 0:  # no constraint at all (a free body): M a = Q
+        return Qf / model.mass, np.zeros((n, 0)), Phi_q
     A = np.zeros((n, nq + m, nq + m))
     d = np.arange(nq + m)
     A[:, d[:nq], d[:nq]] = model.mass
@@ -44,13 +47,15 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
 def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  config: np.ndarray, configurations: list[Configuration],
                  params: list[np.ndarray], events: list[Event], stats: Stats,
-                 status: str = "success") -> Result:
+                 status: Status = Status.SUCCESS, message: str = "success",
+                 event_sample: np.ndarray | None = None) -> Result:
     """Post-process sampled states into a :class:`Result`.
 
     Parameters
     ----------
     t : (n,) s; q, v : (n, nq) centroid coordinates and rates; config : (n,) indices into
-    ``configurations``; params : the parameter vector of each configuration.
+    ``configurations``; params : the parameter vector of each configuration;
+    event_sample : (n_events,) index of the sample holding the state right after each event.
     """
     mech = model.mech
     n = t.size
@@ -70,7 +75,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         c = cd = cdd = np.zeros((nj, 0))
         pts = np.zeros((2, 0))
         phi = hvel = np.zeros((0, model.m))
-    free = np.array([model.free(p)[0] for p in params])
+    free = np.array([model.free_rows(p) for p in params]).reshape(len(params), model.m)
     active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
@@ -99,7 +104,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
 
     data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
             "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
-            "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel}
+            "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel,
+            "event_sample": (np.asarray(event_sample, int) if event_sample is not None
+                             else np.zeros(0, int))}
     meta = {
         "mechanism": mech.name,
         "source": mech.source,
@@ -120,4 +127,4 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         "ground": {k: list(v) for k, v in mech.ground.items()},
         "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
     }
-    return Result(meta, data, configurations, events, stats, status)
+    return Result(meta, data, configurations, events, stats, status, message)

@@ -10,19 +10,15 @@ import html
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import CmmError
 from .result import Result
 
-
-def resample(t_grid: np.ndarray, res: Result, y: np.ndarray) -> np.ndarray:
-    """A series ``y`` of ``res`` linearly interpolated onto ``t_grid`` (s); at repeated
-    (event) times the later, post-event sample wins."""
-    t = res.t
-    keep = np.append(t[1:] != t[:-1], True)
-    return np.interp(t_grid, t[keep], y[keep])
+if TYPE_CHECKING:  # pragma: no cover
+    from .studies import WorkPrecision
 
 
 @dataclass
@@ -70,7 +66,8 @@ class Comparison:
     series: list[SeriesDiff]
     events: list[EventMatch]
     extra_figures: dict[str, Path] = field(default_factory=dict)
-    work_precision: dict | None = None
+    work_precision: WorkPrecision | None = None
+    notes: list[str] = field(default_factory=list)
 
     @property
     def same_event_sequence(self) -> bool:
@@ -134,9 +131,11 @@ class Comparison:
         if self.work_precision:
             md += ["", "## Work-precision", "", "| method | setting | wall time [s] | "
                    "max driving-effort error |", "|---|---|---:|---:|"]
-            for row in self.work_precision["rows"]:
-                md.append(f"| {row['method']} | {row['setting']} | {row['wall']:.4g} | "
-                          f"{row['error']:.3e} |")
+            for row in self.work_precision.rows:
+                err = f"{row.error:.3e}" if row.success else f"failed: {row.status}"
+                md.append(f"| {row.method} | {row.setting} | {row.wall:.4g} | {err} |")
+        if self.notes:
+            md += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
         md += ["", "## Event log", "", f"### {la}", "", "```", self.a.event_table(), "```", "",
                f"### {lb}", "", "```", self.b.event_table(), "```", "", "## Figures", ""]
         for title, path in figs.items():
@@ -168,14 +167,11 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         dt = max(steps) if steps else t_end
     n = int(math.floor(t_end / dt + 1e-9))
     t = dt * np.arange(n + 1)
-    ev_times = np.array([e.t for e in a.events + b.events])
-    mask = np.ones(t.size, bool)
-    for te in ev_times:
-        mask &= np.abs(t - te) > 2 * dt
+    mask = a.away_from_events(t, 2 * dt, b)
     series: list[SeriesDiff] = []
 
     def add(name: str, unit: str, ya: np.ndarray, yb: np.ndarray) -> None:
-        d = (resample(t, a, ya) - resample(t, b, yb))[mask]
+        d = (a.resample(t, ya) - b.resample(t, yb))[mask]
         scale = float(np.max(np.abs(ya), initial=0.0))
         series.append(SeriesDiff(name, unit, float(np.max(np.abs(d), initial=0.0)),
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))
@@ -184,7 +180,7 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     for name in a.meta["drivers"]:
         unit = "N m" if types[name] == "revolute" else "N"
         add(f"driver {name} effort", unit, a.driver(name).effort, b.driver(name).effort)
-    for name in watched_joints(a):
+    for name in a.watched_joints():
         rev = types[name] == "revolute"
         ja, jb = a.joint(name), b.joint(name)
         add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position)
@@ -192,15 +188,6 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         add(f"joint {name} force y", "N", ja.force[:, 1], jb.force[:, 1])
         add(f"joint {name} torque", "N m", ja.torque, jb.torque)
     return Comparison(a, b, t, mask, series, match_events(a, b))
-
-
-def watched_joints(res: Result) -> list[str]:
-    """The joints a report follows: metamorphic joints (limits: geometric constraints)
-    and sprung joints (force constraints, like the double-folded mechanism's D); all
-    joints when there are neither."""
-    out = list(res.meta.get("metamorphic", []))
-    out += [j for j in res.meta.get("springs", {}) if j not in out]
-    return out or list(res.meta["joints"])
 
 
 def match_events(a: Result, b: Result) -> list[EventMatch]:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import CmmError
+from .errors import STATUS_MESSAGES, CmmError, Status
 
 
 @dataclass(frozen=True)
@@ -172,19 +172,23 @@ class Result:
     configurations : list[Configuration]
     events : list[Event]
     stats : Stats
-    status : str
-        ``"success"`` or a message saying why the run stopped early.
+    status : Status
+        How the run ended: ``Status.SUCCESS`` (equal to ``"success"``) or the kind of
+        failure (``"lock-up"``, ``"dead point"``, ...; :data:`cmm_dae.STATUS_MESSAGES`).
+    message : str
+        The run's own sentence: where and why it stopped.
     """
 
     def __init__(self, meta: dict[str, Any], data: dict[str, np.ndarray],
                  configurations: list[Configuration], events: list[Event], stats: Stats,
-                 status: str = "success"):
+                 status: Status | str = Status.SUCCESS, message: str = "success"):
         self.meta = meta
         self.data = data
         self.configurations = configurations
         self.events = events
         self.stats = stats
-        self.status = status
+        self.status = Status(status)
+        self.message = message
 
     # ---------------------------------------------------------------- accessors
     @property
@@ -197,7 +201,42 @@ class Result:
 
     @property
     def success(self) -> bool:
-        return self.status == "success"
+        return self.status == Status.SUCCESS
+
+    @property
+    def explanation(self) -> str:
+        """What :attr:`status` means in general."""
+        return STATUS_MESSAGES[self.status]
+
+    # ------------------------------------------------------------ result-level helpers
+    def resample(self, t_grid: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """A series ``y`` of this Result linearly interpolated onto ``t_grid`` (s); at
+        repeated (event) times the later, post-event sample wins."""
+        t = self.t
+        keep = np.append(t[1:] != t[:-1], True)
+        return np.interp(t_grid, t[keep], np.asarray(y)[keep])
+
+    def away_from_events(self, t_grid: np.ndarray, margin: float,
+                         *others: Result) -> np.ndarray:
+        """Mask of the grid points farther than ``margin`` (s) from every event of this
+        Result and of ``others`` (series jump there)."""
+        mask = np.ones(np.shape(t_grid), bool)
+        for r in (self, *others):
+            for e in r.events:
+                mask &= np.abs(t_grid - e.t) > margin
+        return mask
+
+    def watched_joints(self) -> list[str]:
+        """The joints worth watching: metamorphic joints (limits: geometric constraints)
+        and sprung joints (force constraints, like the double-folded mechanism's D); all
+        joints when there are neither."""
+        out = list(self.meta.get("metamorphic", []))
+        out += [j for j in self.meta.get("springs", {}) if j not in out]
+        return out or list(self.meta["joints"])
+
+    def entered_configurations(self) -> list[int]:
+        """Indices of the configurations the run was actually in, in order of first entry."""
+        return list(dict.fromkeys(int(c) for c in self.configuration))
 
     def _index(self, kind: str, name: str) -> int:
         names = self.meta[kind]
@@ -267,11 +306,15 @@ class Result:
         work = _cumulative(self.t, P_drv)
         diss = _cumulative(self.t, P_diss)
         lost = np.zeros(self.t.size)
+        after = d.get("event_sample", np.zeros(0, int))
         seen: dict[float, int] = {}
-        for e in self.events:  # the k-th event at a time acts from its (k+1)-th sample on
-            k = seen.get(e.t, 0)
-            seen[e.t] = k + 1
-            i = int(np.searchsorted(self.t, e.t, side="left")) + k + 1
+        for n, e in enumerate(self.events):
+            if n < after.size:  # each event books its loss from the sample right after it
+                i = int(after[n])
+            else:  # a file written before event samples were kept: the k-th event at a
+                k = seen.get(e.t, 0)  # time acts from its (k+1)-th sample on
+                seen[e.t] = k + 1
+                i = int(np.searchsorted(self.t, e.t, side="left")) + k + 1
             lost[min(i, self.t.size):] += e.energy_lost
         E = T + Vg + Vs
         resid = work - (E - E[0]) - diss - lost
@@ -339,20 +382,56 @@ class Result:
         meta["configurations"] = [asdict(c) for c in self.configurations]
         meta["events"] = [asdict(e) for e in self.events]
         meta["stats"] = asdict(self.stats)
-        meta["status"] = self.status
+        meta["status"] = str(self.status)
+        meta["message"] = self.message
         with path.open("wb") as f:
             np.savez_compressed(f, __meta__=np.array(json.dumps(meta)), **self.data)
         return path
 
 
 def load_result(path: str | Path) -> Result:
-    """Read a Result written by :meth:`Result.save`."""
-    with np.load(Path(path), allow_pickle=False) as z:
-        meta = json.loads(str(z["__meta__"]))
-        data = {k: z[k] for k in z.files if k != "__meta__"}
-    configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), c["dof"], c["label"])
-               for c in meta.pop("configurations")]
-    events = [Event(**e) for e in meta.pop("events")]
-    stats = Stats(**meta.pop("stats"))
-    status = meta.pop("status")
-    return Result(meta, data, configs, events, stats, status)
+    """Read a Result written by :meth:`Result.save`.
+
+    Raises
+    ------
+    CmmError
+        The file is missing, not a saved Result, truncated or corrupted (named, with what
+        was wrong).
+    """
+    import zipfile
+
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "__meta__" not in z.files:
+                raise CmmError(f"'{path}' is not a cmm_dae result file (no '__meta__' entry; "
+                               "write one with Result.save)")
+            meta = json.loads(str(z["__meta__"]))
+            data = {k: np.asarray(z[k]) for k in z.files if k != "__meta__"}
+        configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), int(c["dof"]),
+                                 str(c["label"])) for c in meta.pop("configurations")]
+        events = [Event(**e) for e in meta.pop("events")]
+        stats = Stats(**meta.pop("stats"))
+        status = meta.pop("status")
+        message = meta.pop("message", status)
+        try:
+            status = Status(status)
+        except ValueError:  # a file from before status codes: a free sentence
+            message, status = status, Status.INTEGRATOR
+        res = Result(meta, data, configs, events, stats, status, message)
+        n = res.t.size
+        for k in ("q", "v", "c", "config"):
+            if data[k].shape[0] != n:
+                raise ValueError(f"array '{k}' has {data[k].shape[0]} rows for {n} times")
+        return res
+    except CmmError:
+        raise
+    except FileNotFoundError:
+        raise CmmError(f"no such result file: '{path}'") from None
+    except OSError as e:
+        raise CmmError(f"cannot read result file '{path}': {e.strerror or e}") from None
+    except (zipfile.BadZipFile, EOFError) as e:
+        raise CmmError(f"'{path}' is truncated or not a result file ({e})") from None
+    except (KeyError, TypeError, ValueError, AttributeError, RecursionError) as e:
+        raise CmmError(f"'{path}' is a corrupted result file ({type(e).__name__}: {e})"
+                       ) from None

@@ -13,11 +13,19 @@ non-collision.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from itertools import combinations
 
 from .mechanism import GROUND, Mechanism
+
+#: Most candidate body sets the group search examines for one mechanism. The search walks
+#: connected sets of bodies, smallest first, which is polynomial for the small groups of
+#: real mechanisms; past this budget the bodies left are reported as not resolved (and
+#: configurations get plain labels) instead of the search growing without bound.
+SEARCH_BUDGET = 20_000
+#: Largest group looked for, in bodies after welding preloaded joints (class II groups have
+#: 2 bodies, class III 4; the paper's augmented groups at most 5).
+MAX_GROUP = 8
 
 
 @dataclass(frozen=True)
@@ -191,8 +199,32 @@ def _class(n_bodies: int, degrees: list[int]) -> int:
     return n_bodies
 
 
-def structure(mech: Mechanism) -> Structure:
+def _connected_sets(units: list[str], neighbours: dict[str, set[str]], budget: int
+                    ) -> Iterator[tuple[str, ...]]:
+    """Connected sets of units, by size, each size in the order of ``units`` (the order
+    ``itertools.combinations`` would give, without the sets that are not connected); no
+    more than about ``budget`` of them are ever built."""
+    order = {u: i for i, u in enumerate(units)}
+    level = {frozenset([u]) for u in units}
+    size = 1
+    while level and len(level) <= budget and size <= MAX_GROUP:
+        budget -= len(level)
+        size += 1
+        yield from (tuple(sorted(s, key=order.__getitem__))
+                    for s in sorted(level, key=lambda s: sorted(order[u] for u in s)))
+        level = {s | {n} for s in level for u in s for n in neighbours[u]
+                 if n not in s and n in order}
+
+
+def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
     """Decompose a mechanism into active parts, Assur groups and augmented Assur groups.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    budget : int
+        Most candidate body sets to examine; bodies no group took within it are listed
+        in ``Structure.unresolved``.
 
     Returns
     -------
@@ -224,12 +256,24 @@ def structure(mech: Mechanism) -> Structure:
             units.setdefault(rep[b], set()).add(b)
     remaining = list(units)
     groups: list[Group] = []
+    at: dict[str, list[str]] = {}  # body -> its joints (drivers' joints left out)
+    for n, j in joints.items():
+        if n not in mech.drivers:
+            for b in {j.first_body, j.second_body}:
+                at.setdefault(b, []).append(n)
+    neighbours: dict[str, set[str]] = {u: set() for u in units}
+    for j in joints.values():
+        a, b = rep.get(j.first_body), rep.get(j.second_body)
+        if a in neighbours and b in neighbours and a != b:
+            neighbours[a].add(b)
+            neighbours[b].add(a)
+    left = [budget]
+    jorder = {n: i for i, n in enumerate(joints)}
 
     def joints_of(S: set[str]) -> tuple[list[str], list[str]]:
         internal, external = [], []
-        for n, j in joints.items():
-            if n in mech.drivers:
-                continue
+        for n in sorted({n for b in S for n in at.get(b, [])}, key=jorder.__getitem__):
+            j = joints[n]
             a, b = j.first_body, j.second_body
             if a in S and b in S:
                 internal.append(n)
@@ -254,33 +298,35 @@ def structure(mech: Mechanism) -> Structure:
         """Smallest group of ``remaining`` units with ``target`` DOF; an augmented group
         must leave at least two bodies once locked (else it is a link welded to a known
         body), unless ``single`` allows that as a last resort."""
-        for size in range(1, len(remaining) + 1):
-            for combo in combinations(remaining, size):
-                S = set().union(*(units[u] for u in combo))
-                internal, external = joints_of(S)
-                if not connected(S, internal):
+        for combo in _connected_sets(remaining, neighbours, left[0]):
+            left[0] -= 1
+            if left[0] < 0:
+                return None
+            S = set().union(*(units[u] for u in combo))
+            internal, external = joints_of(S)
+            if not connected(S, internal):
+                continue
+            live = [j for j in internal if j not in welded]
+            f = 3 * len(combo) - 2 * (len(live) + len(external))
+            meta = tuple(j for j in internal + external if j in metamorphic)
+            if f != target or (target == 1 and not [m for m in meta if m not in welded]):
+                continue
+            name = _group_name(mech, S, internal, external)
+            deg = [sum(rep[b] == u for j in live for b in (joints[j].first_body,
+                                                           joints[j].second_body))
+                   for u in combo]
+            if target == 1:  # class once one (geometric) metamorphic joint locks
+                lock = next(m for m in meta if m not in welded)
+                rep2 = _merge(mech, set(welded) | {lock})
+                n_locked = len({rep2[b] for b in S} - {GROUND})
+                if n_locked < 2 and not single:
                     continue
-                live = [j for j in internal if j not in welded]
-                f = 3 * len(combo) - 2 * (len(live) + len(external))
-                meta = tuple(j for j in internal + external if j in metamorphic)
-                if f != target or (target == 1 and not [m for m in meta if m not in welded]):
-                    continue
-                name = _group_name(mech, S, internal, external)
-                deg = [sum(rep[b] == u for j in live for b in (joints[j].first_body,
-                                                               joints[j].second_body))
-                       for u in combo]
-                if target == 1:  # class once one (geometric) metamorphic joint locks
-                    lock = next(m for m in meta if m not in welded)
-                    rep2 = _merge(mech, set(welded) | {lock})
-                    n_locked = len({rep2[b] for b in S} - {GROUND})
-                    if n_locked < 2 and not single:
-                        continue
-                    cls = _class(n_locked, deg)
-                else:
-                    cls = _class(len(combo), deg)
-                augmented = target == 1 or any(m in welded for m in meta)
-                return Group(name, cls, tuple(sorted(S, key=list(mech.bodies).index)),
-                             tuple(internal), tuple(external), augmented, meta)
+                cls = _class(n_locked, deg)
+            else:
+                cls = _class(len(combo), deg)
+            augmented = target == 1 or any(m in welded for m in meta)
+            return Group(name, cls, tuple(sorted(S, key=list(mech.bodies).index)),
+                         tuple(internal), tuple(external), augmented, meta)
         return None
 
     while remaining:
@@ -295,25 +341,39 @@ def structure(mech: Mechanism) -> Structure:
                      tuple(welded))
 
 
-def configuration_label(st: Structure, locked: dict[str, str],
+def configuration_label(st: Structure | None, locked: dict[str, str],
                         force: dict[str, str]) -> str:
-    """The paper's name of a configuration: non-collision, internal/external collision."""
+    """The paper's name of a configuration: non-collision, internal/external collision.
+
+    Without a structure (``st`` None), or for a joint whose group was not found, the label
+    is plain: "collision (joint E)" without internal/external."""
     parts = []
     for j in sorted(locked):
         if force.get(j) == locked[j]:
             continue  # held by its preloaded spring: a force constraint, not a collision
-        g = st.group_of(j)
-        where = "internal" if g is not None and j in g.internal else "external"
+        g = st.group_of(j) if st is not None else None
+        if g is None:
+            parts.append(f"collision (joint {j})")
+            continue
+        where = "internal" if j in g.internal else "external"
         parts.append(f"{where} collision (joint {j})")
     return ", ".join(parts) if parts else "non-collision"
 
 
-def labeller(mech: Mechanism) -> Callable[[dict[str, str]], tuple[str, int]]:
-    """A function giving (label, mobility) of a configuration from its locked joints."""
-    st = structure(mech)
+def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET
+             ) -> Callable[[dict[str, str]], tuple[str, int]]:
+    """A function giving (label, mobility) of a configuration from its locked joints.
+
+    The structure analysis runs on the first label that needs it (a geometric lock), with
+    a bounded search, so labels never cost more than a small fixed budget."""
     force = force_constraint_joints(mech)
+    mobility = 3 * len(mech.bodies) - 2 * len(mech.joints)
+    cache: list[Structure] = []
 
     def label(locked: dict[str, str]) -> tuple[str, int]:
-        return configuration_label(st, locked, force), st.mobility - len(locked)
+        if not cache and any(force.get(j) != s for j, s in locked.items()):
+            cache.append(structure(mech, budget=budget))
+        return configuration_label(cache[0] if cache else None, locked, force), \
+            mobility - len(locked)
 
     return label

@@ -12,26 +12,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dae import run_dae
 from .equations import Model
-from .iterative import run_iterative
+from .errors import CmmError, SolverError
 from .mechanism import Mechanism
-from .report import resample
 from .result import Result
+from .simulate import simulate
 
 
 def _error(res: Result, ref: Result, t: np.ndarray, series: str) -> float:
     """Max abs difference of a series on grid t, away from the events of both runs."""
-    mask = np.ones(t.size, bool)
     dt = t[1] - t[0] if t.size > 1 else 1.0
-    for e in res.events + ref.events:
-        mask &= np.abs(t - e.t) > 2 * dt
+    mask = res.away_from_events(t, 2 * dt, ref)
     kind, name = series.split(" ", 1)
     if kind == "driver":
         ya, yb = res.driver(name).effort, ref.driver(name).effort
     else:
         ya, yb = res.joint(name).position, ref.joint(name).position
-    d = resample(t, res, ya) - resample(t, ref, yb)
+    d = res.resample(t, ya) - ref.resample(t, yb)
     return float(np.max(np.abs(d[mask]), initial=0.0))
 
 
@@ -85,8 +82,8 @@ def convergence(mech: Mechanism, dts: list[float], *, t_end: float = 1.0,
     """
     model = model or Model(mech)
     grid_dt = max(dts)
-    ref = run_dae(mech, t_end, rtol=ref_rtol, atol=ref_rtol * 1e-2, output_dt=min(dts),
-                  model=model)
+    ref = simulate(mech, t_end, rtol=ref_rtol, atol=ref_rtol * 1e-2, output_dt=min(dts),
+                   model=model)
     if series is None:
         series = [f"driver {n}" for n in mech.drivers] + [
             f"joint {n}" for n, j in mech.joints.items()
@@ -95,7 +92,7 @@ def convergence(mech: Mechanism, dts: list[float], *, t_end: float = 1.0,
     errors: dict[str, list[float]] = {s: [] for s in series}
     walls = []
     for dt in dts:
-        res = run_iterative(mech, t_end, dt=dt, model=model)
+        res = simulate(mech, t_end, method="iterative", dt=dt, model=model)
         walls.append(res.stats.wall_time)
         for s in series:
             errors[s].append(_error(res, ref, t, s))
@@ -105,32 +102,78 @@ def convergence(mech: Mechanism, dts: list[float], *, t_end: float = 1.0,
     return Convergence(list(dts), errors, orders, walls, ref_rtol)
 
 
+@dataclass(frozen=True)
+class WorkPrecisionRow:
+    """One run of a work-precision study: ``wall`` s, ``error`` in the driving effort
+    (N m or N; NaN when the run failed, ``status`` then says why)."""
+
+    method: str
+    setting: str
+    wall: float
+    error: float
+    events: int
+    status: str = "success"
+
+    @property
+    def success(self) -> bool:
+        return self.status == "success"
+
+
+@dataclass(frozen=True)
+class WorkPrecision:
+    """Error in the driving effort against wall time for both methods (see
+    :func:`work_precision`)."""
+
+    rows: list[WorkPrecisionRow]
+    reference_rtol: float
+    driver: str
+    t_end: float
+
+    def table(self) -> str:
+        lines = [f"{'method':<10} {'setting':<12} {'wall [s]':>9} {'error':>11}  status"]
+        for r in self.rows:
+            lines.append(f"{r.method:<10} {r.setting:<12} {r.wall:9.4f} {r.error:11.3e}  "
+                         f"{r.status}")
+        return "\n".join(lines)
+
+
 def work_precision(mech: Mechanism, *, t_end: float = 10.0,
                    rtols: tuple[float, ...] = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
                    dts: tuple[float, ...] = (1e-2, 5e-3, 2.5e-3, 1e-3),
                    ref_rtol: float = 1e-12, driver: str | None = None,
-                   model: Model | None = None) -> dict:
+                   model: Model | None = None) -> WorkPrecision:
     """Error in the driving effort against wall time, IDA over ``rtols`` and the iterative
     algorithm over ``dts``; the reference is IDA at ``ref_rtol``.
 
+    A run that fails part-way is a row with NaN error and its status; a failing reference
+    run raises :class:`CmmError` saying which run it was.
+
     Returns
     -------
-    dict
-        ``rows``: list of {method, setting, wall (s), error (N m or N), events}.
+    WorkPrecision
     """
+    if not mech.drivers:
+        raise CmmError("a work-precision study measures the driving effort: the mechanism "
+                       "has no driver")
     model = model or Model(mech)
     driver = driver or next(iter(mech.drivers))
     grid = 0.01
-    ref = run_dae(mech, t_end, rtol=ref_rtol, atol=ref_rtol * 1e-2, output_dt=grid, model=model)
+    try:
+        ref = simulate(mech, t_end, rtol=ref_rtol, atol=ref_rtol * 1e-2, output_dt=grid,
+                       model=model)
+    except SolverError as e:
+        raise CmmError(f"the work-precision reference run (IDA at rtol {ref_rtol:g}) failed: "
+                       f"{e}") from e
     t = grid * np.arange(int(math.floor(t_end / grid + 1e-9)) + 1)
+    runs = [("IDA", f"rtol {rt:g}", dict(method="ida", rtol=rt, atol=rt * 1e-2,
+                                           output_dt=grid)) for rt in rtols]
+    runs += [("iterative", f"dt {dt:g}", dict(method="iterative", dt=dt,
+                                               output_every=max(1, int(round(grid / dt)))))
+             for dt in dts]
     rows = []
-    for rt in rtols:
-        r = run_dae(mech, t_end, rtol=rt, atol=rt * 1e-2, output_dt=grid, model=model)
-        rows.append({"method": "IDA", "setting": f"rtol {rt:g}", "wall": r.stats.wall_time,
-                     "error": _error(r, ref, t, f"driver {driver}"), "events": len(r.events)})
-    for dt in dts:
-        r = run_iterative(mech, t_end, dt=dt, model=model,
-                          output_every=max(1, int(round(grid / dt))))
-        rows.append({"method": "iterative", "setting": f"dt {dt:g}", "wall": r.stats.wall_time,
-                     "error": _error(r, ref, t, f"driver {driver}"), "events": len(r.events)})
-    return {"rows": rows, "reference_rtol": ref_rtol, "driver": driver, "t_end": t_end}
+    for method, setting, kw in runs:
+        r = simulate(mech, t_end, model=model, throw=False, **kw)
+        err = _error(r, ref, t, f"driver {driver}") if r.success else math.nan
+        rows.append(WorkPrecisionRow(method, setting, r.stats.wall_time, err, len(r.events),
+                                     str(r.status)))
+    return WorkPrecision(rows, ref_rtol, driver, t_end)

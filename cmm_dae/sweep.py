@@ -31,6 +31,38 @@ Metric = Callable[[Result], Mapping[str, float]]
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 
 
+#: Scalar numeric fields a dotted path may set, per table (sub-tables as "spring.rest").
+_FIELDS = {
+    "bodies": ("mass", "inertia"),
+    "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
+               "limits.lower", "limits.upper"),
+    "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
+}
+#: Driver fields each motion law reads.
+_DRIVER_USES = {"constant_speed": ("initial", "speed"), "polynomial": (),
+                "harmonic": ("initial", "amplitude", "frequency", "phase"), "table": ()}
+
+
+def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
+    """Why setting this (existing, numeric) path would change nothing, or None."""
+    table, name, fld = parts[0], parts[1], ".".join(parts[2:])
+    if table == "joints":
+        j = mech.joints[name]
+        if fld == "angle" and j.type != "prismatic":
+            return f"joint '{name}' is revolute: 'angle' is read for prismatic joints only"
+        if fld == "restitution" and j.limits is None:
+            return f"joint '{name}' has no limits for a restitution to act at"
+        if fld == "spring.rest" and j.spring is None:
+            return (f"joint '{name}' has no spring: set joints.{name}.spring.stiffness to "
+                    "give it one")
+    if table == "drivers":
+        d = mech.drivers[name]
+        if fld not in _DRIVER_USES[d.motion]:
+            uses = ", ".join(_DRIVER_USES[d.motion]) or "only its lists"
+            return f"driver '{name}' moves by '{d.motion}', which reads {uses}"
+    return None
+
+
 def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     """A copy of ``mech`` with dotted-path values replaced, validated again.
 
@@ -38,6 +70,13 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
     ``joints.NAME.limits.lower|upper``, ``drivers.JOINT.speed|initial|amplitude|...``,
     ``initial.joints.NAME``, ``initial.velocities.NAME``, ``gravity.x|y``.
+
+    Raises
+    ------
+    ModelError
+        A path that is not a numeric parameter of the mechanism, a value that is not a
+        number, or a path whose value the mechanism never reads (e.g. the amplitude of a
+        constant-speed driver), each named.
     """
     bodies, joints = dict(mech.bodies), dict(mech.joints)
     drivers = dict(mech.drivers)
@@ -45,35 +84,38 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     gravity = list(mech.gravity)
     problems = []
     for path, value in values.items():
-        parts = path.split(".")
-        try:
-            value = float(value)
-            if parts[0] in ("bodies", "joints", "drivers") and len(parts) in (3, 4):
-                table = {"bodies": bodies, "joints": joints, "drivers": drivers}[parts[0]]
-                obj = table[parts[1]]
-                if len(parts) == 3:
-                    getattr(obj, parts[2])  # unknown attribute -> AttributeError
-                    table[parts[1]] = replace(obj, **{parts[2]: value})
-                else:
-                    sub = getattr(obj, parts[2])
-                    if sub is None:
-                        sub = _SUB[parts[2]](**({"stiffness": 0.0} if parts[2] == "spring"
-                                                else {"damping": 0.0}
-                                                if parts[2] == "damper" else {}))
-                    getattr(sub, parts[3])
-                    table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]:
-                                                                                value})})
-            elif parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints",
-                                                                              "velocities"):
-                (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
-            elif parts[0] == "gravity" and len(parts) == 2 and parts[1] in ("x", "y"):
-                gravity["xy".index(parts[1])] = value
+        parts = str(path).split(".")
+        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+            problems.append(Problem("sweep", path, f"expected a number, got {value!r}"))
+            continue
+        value = float(value)
+        tables = {"bodies": bodies, "joints": joints, "drivers": drivers}
+        if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
+                and ".".join(parts[2:]) in _FIELDS[parts[0]]:
+            why = _no_effect(mech, parts)
+            if why is not None:
+                problems.append(Problem("sweep", path, f"has no effect: {why}"))
+                continue
+            table = tables[parts[0]]
+            obj = table[parts[1]]
+            if len(parts) == 3:
+                table[parts[1]] = replace(obj, **{parts[2]: value})
             else:
-                raise KeyError(path)
-        except (KeyError, AttributeError, TypeError, ValueError):
-            problems.append(Problem("sweep", path, f"not a parameter of the mechanism (or "
-                                    f"not a number: {value!r}); e.g. joints.D.spring.stiffness,"
-                                    " bodies.slider.mass, joints.E.limits.upper"))
+                sub = getattr(obj, parts[2])
+                if sub is None:
+                    sub = _SUB[parts[2]](**({"stiffness": 0.0} if parts[2] == "spring"
+                                            else {"damping": 0.0}
+                                            if parts[2] == "damper" else {}))
+                table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]: value})})
+        elif parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities") \
+                and parts[2] in mech.joints:
+            (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
+        elif parts[0] == "gravity" and len(parts) == 2 and parts[1] in ("x", "y"):
+            gravity["xy".index(parts[1])] = value
+        else:
+            problems.append(Problem("sweep", path, "not a parameter of the mechanism; e.g. "
+                                    "joints.D.spring.stiffness, bodies.slider.mass, "
+                                    "joints.E.limits.upper, drivers.A.speed"))
     if problems:
         raise ModelError(problems, mech.source)
     from .mechanism import Initial
@@ -111,7 +153,7 @@ def default_metrics(res: Result) -> dict[str, float]:
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
              metrics: Metric | None, run_options: dict[str, Any]) -> dict[str, Any]:
     """One sweep row; never raises for a failing variant (status and message say why)."""
-    from .dae import run_dae
+    from .simulate import run_dae
 
     row: dict[str, Any] = dict(values)
     t0 = time.perf_counter()
@@ -119,10 +161,10 @@ def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
         res = run_dae(with_params(mech, values), t_end, throw=False, **run_options)
         row.update((metrics or default_metrics)(res))
         row["status"] = "success" if res.success else "failed"
-        row["message"] = "" if res.success else res.status
+        row["message"] = "" if res.success else " ".join(res.message.split())
         row["t_reached"] = float(res.t[-1])
     except CmmError as e:
-        row.update(status="error", message=str(e).replace("\n", " "), t_reached=math.nan)
+        row.update(status="error", message=" ".join(str(e).split()), t_reached=math.nan)
     row["wall_s"] = time.perf_counter() - t0
     return row
 
@@ -169,26 +211,56 @@ def _key(values: Mapping[str, Any], names: list[str]) -> tuple:
 
 
 def _read_checkpoint(path: Path, names: list[str]) -> dict[tuple, dict[str, Any]]:
+    """Rows already done in a checkpoint file, by case key.
+
+    A file that is not a checkpoint of this sweep (another CSV, anything else) is refused
+    and left untouched. A last line torn by an interrupted write (no line end, or a row of
+    the wrong width) is cut off, so that its case runs again and the next row is never
+    glued onto it.
+    """
     done: dict[tuple, dict[str, Any]] = {}
-    if not path.is_file():
+    if not path.exists():
         return done
-    with path.open(newline="") as f:
-        for row in csv.DictReader(f):
-            if row.get("case") is None:
+    if not path.is_file():
+        raise CmmError(f"checkpoint '{path}' is not a file")
+    raw = path.read_bytes()
+    if not raw:
+        return done
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise CmmError(f"'{path}' is not a sweep checkpoint (not UTF-8 text); it was left "
+                       "untouched: choose another --out / checkpoint path") from None
+    lines = text.splitlines(keepends=True)
+    header = next(csv.reader([lines[0]]), [])
+    needed = {"case", "status", *names}
+    if not lines[0].endswith("\n") or header[:1] != ["case"] or not needed <= set(header):
+        raise CmmError(f"'{path}' is not a checkpoint of this sweep (its first line should "
+                       f"name the columns case, {', '.join(names)}, ..., status); it was left "
+                       "untouched: choose another --out / checkpoint path")
+    keep = [lines[0]]
+    for line in lines[1:]:
+        row = next(csv.reader([line]), [])
+        if not line.endswith("\n") or len(row) != len(header):
+            break  # torn: this row and anything after it is run again
+        keep.append(line)
+    if len(keep) < len(lines):
+        path.write_text("".join(keep), encoding="utf-8")  # cut the torn tail
+    for line in keep[1:]:
+        row = dict(zip(header, next(csv.reader([line])), strict=True))
+        parsed: dict[str, Any] = {}
+        for k, v in row.items():
+            if k in ("status", "message"):
+                parsed[k] = v
                 continue
-            parsed: dict[str, Any] = {}
-            for k, v in row.items():
-                if k in ("status", "message") or v is None:
-                    parsed[k] = v
-                    continue
-                try:
-                    parsed[k] = float(v) if v != "" else math.nan
-                except ValueError:
-                    parsed[k] = v
             try:
-                done[_key(parsed, names)] = parsed
-            except (KeyError, ValueError):
-                continue
+                parsed[k] = float(v) if v != "" else math.nan
+            except ValueError:
+                parsed[k] = v
+        try:
+            done[_key(parsed, names)] = parsed
+        except (KeyError, ValueError):
+            continue
     return done
 
 

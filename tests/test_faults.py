@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-import cmm_dae.dae as dae_mod
+import cmm_dae.ida as ida_mod
 
 from refs import short_coupler_four_bar
 
@@ -52,14 +52,14 @@ def test_lock_up(tmp_path, method):
 
 def test_keyboard_interrupt_keeps_partial_result(monkeypatch):
     mech = cd.load(MODELS / "double_folded.toml")
-    orig = dae_mod._Segment.eventsfn
+    orig = ida_mod.IdaIntegrator._events
 
     def interrupted(self, t, y, yp, out):
         if t > 4.0:
             raise KeyboardInterrupt
         orig(self, t, y, yp, out)
 
-    monkeypatch.setattr(dae_mod._Segment, "eventsfn", interrupted)
+    monkeypatch.setattr(ida_mod.IdaIntegrator, "_events", interrupted)
     with pytest.raises(cd.SolverError, match="interrupted") as info:
         cd.run_dae(mech, 10.0)
     part = info.value.result

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae.report import resample
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -140,7 +139,7 @@ def test_double_folded_against_minimal_coordinate_model():
     assert [k for k, _ in out["switches"]] == [e.kind for e in res.events]
     for (_, t_min), e in zip(out["switches"], res.events, strict=True):
         assert abs(t_min - e.t) <= 1e-9
-    tau = resample(out["t"], res, res.driver("A").effort)
+    tau = res.resample(out["t"], res.driver("A").effort)
     far = np.ones(out["t"].size, bool)
     for e in res.events:
         far &= np.abs(out["t"] - e.t) > 0.02

@@ -22,7 +22,6 @@ import numpy as np
 
 import cmm_dae as cd
 from cmm_dae.bench import bench_models, table
-from cmm_dae.report import resample
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -32,7 +31,7 @@ import minimal_double_folded as mdf  # noqa: E402
 
 
 def torque_error(t, tau, ref, events) -> float:
-    r = resample(t, ref, ref.driver("A").effort)
+    r = ref.resample(t, ref.driver("A").effort)
     far = np.ones(t.size, bool)
     for te in events:
         far &= np.abs(t - te) > 0.02
@@ -67,7 +66,7 @@ def main() -> None:
     wp = []
 
     def row(method: str, setting: str, wall: float, r: cd.Result) -> dict:
-        tau = resample(grid, r, r.driver("A").effort)
+        tau = r.resample(grid, r.driver("A").effort)
         return {"method": method, "setting": setting, "wall": wall,
                 "error": torque_error(grid, tau, ref, ref_ev),
                 "switch_err": max(abs(a.t - b) for a, b in zip(r.events, ref_ev, strict=True))}

@@ -23,7 +23,6 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import cmm_dae as cd
-from cmm_dae.report import resample
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -235,7 +234,7 @@ def main() -> None:
     w0 = time.perf_counter()
     out = simulate(mech, 10.0, rtol=1e-10)
     wall = time.perf_counter() - w0
-    tau_ref = resample(out["t"], ref, ref.driver("A").effort)
+    tau_ref = ref.resample(out["t"], ref.driver("A").effort)
     far = np.ones(out["t"].size, bool)
     for e in ref.events:
         far &= np.abs(out["t"] - e.t) > 0.02

@@ -1,0 +1,108 @@
+"""The contract between the run driver (:mod:`cmm_dae.simulate`) and an integrator.
+
+An integrator only advances the state within the configuration in force, from a time to
+the end of the run or to the next trigger, recording output samples on the way, and says
+why it stopped in a :class:`SegmentEnd`. Everything else — options, model, initial state,
+the event policy, failure wrapping, the Result — is the driver's, once for all methods
+(as scipy's ``OdeSolver`` subclasses implement one step and ``solve_ivp`` the rest).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from .equations import Model
+from .events import HybridState, Policy, Transition, Trigger
+from .result import Stats
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Checked run options (see :func:`cmm_dae.simulate` for their meaning and units)."""
+
+    t_end: float
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    output_dt: float | None = 0.01
+    dt: float = 0.01
+    output_every: int = 1
+    max_events: int = 1000
+    v_lock: float = 1e-6
+    max_steps: int = 500_000
+
+
+@dataclass(frozen=True)
+class SegmentEnd:
+    """Where and why an integrator stopped.
+
+    t : float
+        Time reached, s.
+    q, v : ndarray (nq,)
+        State there (positions m/rad, velocities m/s, rad/s).
+    triggers : tuple of Trigger
+        What was detected at t (several at one instant are all listed), empty otherwise.
+    reason : {"end", "event", "restart"}
+        Reached ``t_end``; stopped at triggers; or stopped for a restart with nothing to
+        switch (a driver breakpoint, or a state to re-initialise from).
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    triggers: tuple[Trigger, ...] = ()
+    reason: Literal["end", "event", "restart"] = "end"
+
+
+class Recorder:
+    """Output samples (t, q, v, configuration index), appended in time order."""
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.q: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.c: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def add(self, t: float, q: np.ndarray, v: np.ndarray, c: int) -> None:
+        self.t.append(t)
+        self.q.append(np.array(q))
+        self.v.append(np.array(v))
+        self.c.append(c)
+
+    def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int) -> None:
+        self.t.extend(t.tolist())
+        self.q.extend(q)
+        self.v.extend(v)
+        self.c.extend([c] * t.size)
+
+    def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        n = len(self.t)
+        return (np.array(self.t), np.array(self.q).reshape(n, nq),
+                np.array(self.v).reshape(n, nq), np.array(self.c, int))
+
+
+class Integrator(ABC):
+    """One integration method. Subclasses set :attr:`method` and implement
+    :meth:`advance`; they may override :meth:`after_events`."""
+
+    method: str = ""
+
+    def __init__(self, model: Model, hs: HybridState, opts: RunOptions, stats: Stats):
+        self.model, self.hs, self.opts, self.stats = model, hs, opts, stats
+        self.policy = Policy(opts.v_lock)
+
+    @abstractmethod
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        """Integrate in the configuration ``self.hs.locked`` from (t0, q, v) until
+        ``t_end`` or the next trigger, adding output samples to ``rec`` (a sample at the
+        trigger's time, before any switch, included); raise :class:`SolverError` with a
+        status on failure."""
+
+    def after_events(self, transitions: list[Transition]) -> None:  # noqa: B027
+        """Told what the policy did at the last stop (default: nothing to adjust)."""

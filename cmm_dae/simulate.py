@@ -1,0 +1,254 @@
+"""The one run driver: ``simulate(mech, method="ida" | "iterative", ...)``.
+
+It owns, once for every method, what a run is: checking the options, building the model,
+the consistent initial state, the hybrid loop's bookkeeping (the event policy of
+:mod:`cmm_dae.events` applied to whatever the integrator detected, one output sample after
+every event), failure wrapping (every exception inside a run becomes a
+:class:`~cmm_dae.errors.SolverError` carrying the partial Result) and the Result itself.
+An integrator (:mod:`cmm_dae.ida`, :mod:`cmm_dae.iterative`) only advances the state to the
+end time or to the next trigger.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from . import events as ev
+from .assembly import start_state
+from .equations import Model
+from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
+from .ida import IdaIntegrator
+from .integrator import Integrator, Recorder, RunOptions
+from .iterative import IterativeIntegrator, steps_needed
+from .mechanism import Mechanism
+from .post import build_result
+from .result import Result, Stats
+from .structure import force_constraint_joints, labeller
+
+#: The integration methods, by name.
+METHODS: dict[str, type[Integrator]] = {"ida": IdaIntegrator, "iterative": IterativeIntegrator}
+
+#: Most memory the output samples of one run may take (their post-processed arrays), bytes.
+MAX_OUTPUT_BYTES = 4 * 2**30
+#: Default run-wide step budget per simulated second (at least 500,000 in all).
+STEPS_PER_SECOND = 50_000
+
+_BLAS = None
+
+
+def _one_blas_thread():
+    """A context with one BLAS thread: the package's systems are small, and on a busy
+    2-core machine OpenBLAS's default threads turned a 0.47 s run into 5.3 s."""
+    global _BLAS
+    from threadpoolctl import ThreadpoolController
+
+    if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
+def _is_num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: Any,
+                  output_dt: Any, dt: Any, output_every: Any, max_events: Any, v_lock: Any,
+                  max_steps: Any) -> RunOptions:
+    """Every run option checked up front; one :class:`ModelError` lists all problems."""
+    bad: list[Problem] = []
+
+    def need(ok: bool, key: str, msg: str, value: Any) -> bool:
+        if not ok:
+            bad.append(Problem("run", key, f"{msg}, got {value!r}"))
+        return ok
+
+    if method not in METHODS:
+        bad.append(Problem("run", "method", f"expected one of {', '.join(METHODS)}, "
+                           f"got {method!r}"))
+    ok_t = need(_is_num(t_end) and math.isfinite(t_end) and t_end > 0, "t_end",
+                "expected a positive end time in s", t_end)
+    need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol", "expected 1e-15 <= rtol <= 1e-2",
+         rtol)
+    need(_is_num(atol) and 0 < atol <= 1e-2, "atol", "expected 0 < atol <= 1e-2", atol)
+    ok_out = need(output_dt is None or (_is_num(output_dt) and math.isfinite(output_dt)
+                                        and output_dt > 0),
+                  "output_dt", "expected a positive step in s or None", output_dt)
+    ok_dt = need(_is_num(dt) and math.isfinite(dt) and dt > 0, "dt",
+                 "expected a positive step in s", dt)
+    ok_every = need(isinstance(output_every, int) and not isinstance(output_every, bool)
+                    and output_every >= 1, "output_every", "expected an integer >= 1",
+                    output_every)
+    need(isinstance(max_events, int) and not isinstance(max_events, bool) and max_events >= 0,
+         "max_events", "expected an integer >= 0", max_events)
+    need(_is_num(v_lock) and math.isfinite(v_lock) and v_lock >= 0, "v_lock",
+         "expected a speed >= 0 (rad/s or m/s)", v_lock)
+    ok_steps = need(max_steps is None or (isinstance(max_steps, int)
+                                          and not isinstance(max_steps, bool)
+                                          and max_steps >= 1),
+                    "max_steps", "expected an integer >= 1 or None", max_steps)
+    if ok_t and ok_steps and max_steps is None:
+        max_steps = max(500_000, int(min(STEPS_PER_SECOND * t_end, 2**62)))
+    if ok_t and ok_dt and ok_steps and method == "iterative":
+        n = t_end / dt
+        if n > max_steps:
+            bad.append(Problem("run", "dt", f"{dt!r} s would take {n:.3g} fixed steps to "
+                               f"t_end = {t_end!r} s, more than max_steps = {max_steps}; "
+                               "take a larger step or raise max_steps"))
+    if ok_t and ok_out and ok_dt and ok_every and not bad:
+        n = (t_end / output_dt if method == "ida" and output_dt is not None else
+             t_end / dt / output_every if method == "iterative" else 0.0)
+        nb, nj = len(mech.bodies), len(mech.joints)
+        per = 8 * (9 * nb + 2 * nj + 2 * len(mech.drivers) + 7 * nj + 8)
+        if n * per > MAX_OUTPUT_BYTES:
+            key = "output_dt" if method == "ida" else "output_every"
+            bad.append(Problem("run", key, f"{n:.3g} output samples would take "
+                               f"{n * per / 2**30:.3g} GiB, more than the "
+                               f"{MAX_OUTPUT_BYTES / 2**30:g} GiB cap; sample more coarsely"))
+    if bad:
+        raise ModelError(bad)
+    return RunOptions(float(t_end), float(rtol), float(atol),
+                      None if output_dt is None else float(output_dt), float(dt),
+                      output_every, max_events, float(v_lock), int(max_steps))
+
+
+def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
+             rtol: float = 1e-8, atol: float = 1e-10, output_dt: float | None = 0.01,
+             dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
+             v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
+             model: Model | None = None) -> Result:
+    """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        The mechanism (:func:`cmm_dae.load` reads one from TOML).
+    t_end : float
+        End time, s.
+    method : {"ida", "iterative"}
+        SUNDIALS IDA on the index-2 DAE, or the paper's fixed-step iterative algorithm.
+    rtol, atol : float
+        IDA: relative tolerance and absolute tolerance on positions (m, rad) and
+        velocities (m/s, rad/s).
+    output_dt : float or None
+        IDA: output spacing, s (None: IDA's own steps). Event times are always added.
+    dt : float
+        Iterative: the fixed step, s (the paper uses 0.01 s).
+    output_every : int
+        Iterative: keep every k-th step (events are always kept).
+    max_events : int
+        Stop with :class:`SolverError` after this many events.
+    v_lock : float
+        A rebound slower than this (rad/s or m/s) locks the joint.
+    max_steps : int or None
+        Most steps in the whole run (default: 50,000 per simulated second, at least
+        500,000): beyond it IDA stops with a "stalled" :class:`SolverError` and its partial
+        Result instead of crawling on; a fixed step that would need more is refused.
+    throw : bool
+        Raise :class:`SolverError` on failure (True) or return the partial Result with
+        ``status`` and ``message`` saying what happened (False).
+    model : Model or None
+        A prebuilt model of ``mech`` (saves the CasADi build).
+
+    Returns
+    -------
+    Result
+
+    Raises
+    ------
+    ModelError
+        A bad option (all of them named at once) or a bad initial state.
+    AssemblyError
+        The mechanism cannot be assembled at t = 0.
+    SolverError
+        The run failed part-way; ``.result`` holds everything computed up to then.
+    """
+    opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
+                         output_every=output_every, max_events=max_events, v_lock=v_lock,
+                         max_steps=max_steps)
+    with _one_blas_thread():
+        return _run(mech, opts, METHODS[method], throw, model)
+
+
+def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
+         model: Model | None) -> Result:
+    wall0 = time.perf_counter()
+    try:
+        model = model if model is not None else Model(mech)
+        build = time.perf_counter() - wall0
+        hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
+        q, v, events = start_state(model, hs)
+    except CmmError:
+        raise
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as e:
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    stats = Stats(build_time=build, method=cls.method)
+    rec = Recorder()
+    rec.add(0.0, q, v, hs.current())
+    after = [0] * len(events)  # the sample right after each event
+    integ = cls(model, hs, opts, stats)
+    status, message, err = Status.SUCCESS, "success", None
+    t = 0.0
+    try:
+        while True:
+            end = integ.advance(t, q, v, rec)
+            stats.segments += 1
+            t, q, v = end.t, end.q, end.v
+            for trig in end.triggers:
+                done = ev.handle(hs, trig, q, v, t, integ.policy)
+                for tr in done:
+                    events.append(tr.event)
+                    q, v = tr.q, tr.v
+                    rec.add(t, q, v, tr.event.after)
+                    after.append(len(rec) - 1)
+                    if len(events) > opts.max_events:
+                        e = tr.event
+                        raise SolverError(f"max_events = {opts.max_events} reached at t = "
+                                          f"{t:.9g} s (last: {e.kind} of joint {e.joint})",
+                                          status=Status.MAX_EVENTS)
+                integ.after_events(done)
+            if end.reason == "end":
+                break
+    except KeyboardInterrupt as e:
+        status, message, err = Status.INTERRUPTED, "interrupted (KeyboardInterrupt)", e
+    except SolverError as e:
+        status, message, err = e.status, str(e), e
+    except Exception as e:  # noqa: BLE001 - every failure inside a run keeps its partial Result
+        status, err = Status.NUMERICAL, e
+        message = (f"numerical failure after t = {rec.t[-1]:.9g} s (the last state kept): "
+                   f"{type(e).__name__}: {e}")
+    res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
+                       stats, status, message, np.array(after, int))
+    stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
+    if err is not None and throw:
+        raise SolverError(message, status=status, result=res,
+                          configuration=hs.configurations[hs.current()],
+                          last_event=events[-1] if events else None) from err
+    return res
+
+
+def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,
+            output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
+            max_steps: int | None = None, throw: bool = True,
+            model: Model | None = None) -> Result:
+    """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
+    return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
+                    max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
+                    model=model)
+
+
+def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
+                  output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
+                  max_steps: int | None = None, throw: bool = True,
+                  model: Model | None = None) -> Result:
+    """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
+    ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
+    return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
+                    v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
+                    model=model)
+
+
+__all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate", "steps_needed"]
