@@ -62,7 +62,9 @@ class Group:
 class Structure:
     """Structure of a mechanism: ``mobility`` (Grübler, drivers removed), ``active``
     (driven bodies) and ``groups`` in the order they attach; ``unresolved`` lists bodies
-    no group could take (a mechanism that is not built from Assur groups)."""
+    no group could take (a mechanism that is not built from Assur groups, or one whose
+    groups lie beyond the search's budget); ``examined`` counts the candidate body sets
+    the search looked at."""
 
     mechanism: str
     mobility: int
@@ -70,6 +72,7 @@ class Structure:
     groups: tuple[Group, ...]
     unresolved: tuple[str, ...] = field(default=())
     force_constraints: tuple[str, ...] = ()
+    examined: int = 0
 
     def group_of(self, joint: str) -> Group | None:
         for g in self.groups:
@@ -267,7 +270,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
         if a in neighbours and b in neighbours and a != b:
             neighbours[a].add(b)
             neighbours[b].add(a)
-    left = [budget]
+    left_budget = [budget]
     jorder = {n: i for i, n in enumerate(joints)}
 
     def joints_of(S: set[str]) -> tuple[list[str], list[str]]:
@@ -298,9 +301,9 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
         """Smallest group of ``remaining`` units with ``target`` DOF; an augmented group
         must leave at least two bodies once locked (else it is a link welded to a known
         body), unless ``single`` allows that as a last resort."""
-        for combo in _connected_sets(remaining, neighbours, left[0]):
-            left[0] -= 1
-            if left[0] < 0:
+        for combo in _connected_sets(remaining, neighbours, left_budget[0]):
+            left_budget[0] -= 1
+            if left_budget[0] < 0:
                 return None
             S = set().union(*(units[u] for u in combo))
             internal, external = joints_of(S)
@@ -338,7 +341,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
         remaining = [u for u in remaining if not units[u] <= known]
     left = [b for u in remaining for b in sorted(units[u], key=list(mech.bodies).index)]
     return Structure(mech.name, mobility, tuple(active), tuple(groups), tuple(left),
-                     tuple(welded))
+                     tuple(welded), budget - max(left_budget[0], 0))
 
 
 def configuration_label(st: Structure | None, locked: dict[str, str],

@@ -269,18 +269,6 @@ def test_event_table_text():
     assert len(table.splitlines()) == 2 + len(res.events)
 
 
-def test_structure_classic_mechanisms():
-    sc = cd.structure(cd.load(MODELS / "slider_crank.toml"))
-    assert sc.mobility == 1 and sc.active == ("crank",)
-    assert [(g.name, g.cls, g.augmented) for g in sc.groups] == [("RRP", 2, False)]
-    assert sc.groups[0].internal == ("C",) and set(sc.groups[0].external) == {"B", "E"}
-    fb = cd.structure(cd.load(MODELS / "four_bar.toml"))
-    assert [(g.name, g.cls) for g in fb.groups] == [("RRR", 2)]
-    text = str(cd.structure(cd.load(MODELS / "slider_crank_stop.toml")))
-    assert "augmented Assur group RRRP (class II)" in text
-    assert "E (external, geometric constraint)" in text
-
-
 def test_lock_of_wrong_sign_releases_at_once():
     mech = cd.load(TMODELS / "spring_block_stop.toml")
     res = cd.run_dae(mech, 2.0, rtol=1e-10, atol=1e-12, output_dt=0.001)
@@ -295,13 +283,3 @@ def test_lock_of_wrong_sign_releases_at_once():
     ref = 0.1 * np.cos(w * (res.t[after] - t1))
     assert np.max(np.abs(res.joint("X").position[after] - ref)) <= 1e-8
     assert res.t[-1] == 2.0
-
-
-def test_internal_and_external_collision_labels():
-    from cmm_dae.structure import configuration_label
-
-    st = cd.structure(cd.load(MODELS / "slider_crank_stop.toml"))
-    assert configuration_label(st, {}, {}) == "non-collision"
-    assert configuration_label(st, {"D": "lower"}, {}) == "internal collision (joint D)"
-    assert configuration_label(st, {"E": "upper"}, {}) == "external collision (joint E)"
-    assert configuration_label(st, {"E": "upper"}, {"E": "upper"}) == "non-collision"
