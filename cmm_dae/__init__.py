@@ -23,7 +23,7 @@ from .loader import from_dict, load
 from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
 from .report import Comparison, compare
 from .result import Configuration, Event, Result, Stats, load_result
-from .simulate import METHODS, run_dae, run_iterative, simulate
+from .runner import METHODS, run_dae, run_iterative, simulate
 from .structure import Group, Structure, labeller, structure
 from .studies import Convergence, WorkPrecision, convergence, work_precision
 from .sweep import SweepTable, sweep, with_params

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from .equations import Model
 from .loader import load
-from .simulate import run_dae, run_iterative
+from .runner import run_dae, run_iterative
 
 
 def _best(fn, repeat: int) -> tuple[float, object]:

@@ -89,7 +89,12 @@ class ModelError(CmmError, ValueError):
             problems = [problems]
         self.problems: list[Problem] = list(problems)
         self.source = source
-        head = f"model file '{source}'" if source else "mechanism"
+        if source:
+            head = f"model file '{source}'"
+        elif self.problems and all(p.table == "run" for p in self.problems):
+            head = "run options"
+        else:
+            head = "mechanism"
         n = len(self.problems)
         lines = [f"{head}: {n} problem{'s' if n != 1 else ''}:"]
         lines += [f"  - {p}" for p in self.problems]

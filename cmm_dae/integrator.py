@@ -1,4 +1,4 @@
-"""The contract between the run driver (:mod:`cmm_dae.simulate`) and an integrator.
+"""The contract between the run driver (:mod:`cmm_dae.runner`) and an integrator.
 
 An integrator only advances the state within the configuration in force, from a time to
 the end of the run or to the next trigger, recording output samples on the way, and says

@@ -402,6 +402,10 @@ def load_result(path: str | Path) -> Result:
 
     path = Path(path)
     try:
+        with path.open("rb") as f:
+            if f.read(2) != b"PK":  # every .npz is a zip archive
+                raise CmmError(f"'{path}' is not a result file (not an .npz archive written "
+                               "by Result.save)")
         with np.load(path, allow_pickle=False) as z:
             if "__meta__" not in z.files:
                 raise CmmError(f"'{path}' is not a cmm_dae result file (no '__meta__' entry; "

@@ -16,7 +16,7 @@ from .equations import Model
 from .errors import CmmError, SolverError
 from .mechanism import Mechanism
 from .result import Result
-from .simulate import simulate
+from .runner import simulate
 
 
 def _error(res: Result, ref: Result, t: np.ndarray, series: str) -> float:

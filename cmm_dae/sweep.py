@@ -27,6 +27,8 @@ from .mechanism import Damper, Limits, Mechanism, Spring
 from .result import Result
 
 Metric = Callable[[Result], Mapping[str, float]]
+#: Most cases in one sweep (a grid's size is the product of its value counts).
+MAX_CASES = 1_000_000
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 
@@ -130,9 +132,16 @@ def cases_from(params: Mapping[str, Iterable[float]] | list[Mapping[str, float]]
     """A grid (dict of value lists: cartesian product, last key fastest) or explicit cases."""
     if isinstance(params, Mapping):
         keys = list(params)
-        return [dict(zip(keys, combo, strict=True))
-                for combo in itertools.product(*(list(params[k]) for k in keys))]
-    return [dict(c) for c in params]
+        lists = [list(params[k]) for k in keys]
+        n = math.prod(len(v) for v in lists)
+        if n > MAX_CASES:
+            raise ModelError(Problem("sweep", " x ".join(keys), f"a grid of {n:.3g} cases; "
+                                     f"at most {MAX_CASES} in one sweep"))
+        return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*lists)]
+    cases = [dict(c) for c in params]
+    if len(cases) > MAX_CASES:
+        raise ModelError(Problem("sweep", "cases", f"{len(cases)} cases; at most {MAX_CASES}"))
+    return cases
 
 
 def default_metrics(res: Result) -> dict[str, float]:
@@ -153,7 +162,7 @@ def default_metrics(res: Result) -> dict[str, float]:
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
              metrics: Metric | None, run_options: dict[str, Any]) -> dict[str, Any]:
     """One sweep row; never raises for a failing variant (status and message say why)."""
-    from .simulate import run_dae
+    from .runner import run_dae
 
     row: dict[str, Any] = dict(values)
     t0 = time.perf_counter()
@@ -401,10 +410,16 @@ def parse_range(spec: str) -> tuple[str, list[float]]:
     try:
         if ":" in rhs:
             a, b, n = rhs.split(":")
-            values = list(np.linspace(float(a), float(b), int(n)))
+            lo, hi, count = float(a), float(b), int(n)
         else:
             values = [float(v) for v in rhs.split(",")]
+            count = len(values)
     except ValueError:
         raise ModelError(Problem("sweep", path, f"expected A:B:N or V1,V2,...; got {rhs!r}")
                          ) from None
+    if not 1 <= count <= MAX_CASES:
+        raise ModelError(Problem("sweep", path, f"expected 1 to {MAX_CASES} values, "
+                                 f"got {count}"))
+    if ":" in rhs:
+        values = list(np.linspace(lo, hi, count))
     return path, values
