@@ -56,9 +56,12 @@ class IdaIntegrator(Integrator):
 
     method = "ida"
 
+    @staticmethod
+    def time_resolution(opts: RunOptions) -> float:
+        return ev.ZENO_DT  # events are located to round-off
+
     def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
         super().__init__(model, hs, opts, stats)
-        self.policy = ev.Policy(opts.v_lock, resolution=ev.ZENO_DT)
         nq = model.nq
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)

@@ -88,14 +88,20 @@ class Recorder:
 
 
 class Integrator(ABC):
-    """One integration method. Subclasses set :attr:`method` and implement
-    :meth:`advance`; they may override :meth:`after_events`."""
+    """One integration method. Subclasses set :attr:`method`, implement
+    :meth:`time_resolution` and :meth:`advance`; they may override :meth:`after_events`."""
 
     method: str = ""
 
     def __init__(self, model: Model, hs: HybridState, opts: RunOptions, stats: Stats):
         self.model, self.hs, self.opts, self.stats = model, hs, opts, stats
-        self.policy = Policy(opts.v_lock)
+        self.policy = Policy(opts.v_lock, resolution=self.time_resolution(opts))
+
+    @staticmethod
+    @abstractmethod
+    def time_resolution(opts: RunOptions) -> float:
+        """Shortest time between two events this method resolves, s (the event policy's
+        Zeno rule ends bounces that reach it)."""
 
     @abstractmethod
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:

@@ -99,11 +99,14 @@ class IterativeIntegrator(Integrator):
 
     method = "iterative"
 
+    @staticmethod
+    def time_resolution(opts: RunOptions) -> float:
+        # crossings are seen at step ends only: bounces closer than a step cannot be told
+        # apart, and the policy's Zeno rule ends them there
+        return opts.dt
+
     def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
         super().__init__(model, hs, opts, stats)
-        # The step is the algorithm's time resolution: a rebound that would come back
-        # within one step cannot be followed and locks (the Zeno rule of the policy).
-        self.policy = ev.Policy(opts.v_lock, resolution=opts.dt)
         mech = model.mech
         self.prefer = [k for k in mech.initial.joints if k not in mech.drivers]
         self.n_steps = steps_needed(opts.t_end, opts.dt)
