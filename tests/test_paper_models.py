@@ -92,7 +92,7 @@ def test_nipper_sequence(nipper):
     assert sequence(b) == GOLDEN_NIPPER
     t_close = a.events[2].t
     t_open = a.events[3].t
-    assert 5.0 < t_close < 5.6 and 9.0 < t_open < 9.6  # shared/MODELS.md: 5.3 s and 9.3 s
+    assert 5.0 < t_close < 5.6 and 9.0 < t_open < 9.6  # docs/paper_models.md: 5.3 s and 9.3 s
     for ea, eb in zip(a.events[1:], b.events[1:], strict=True):
         assert 0.0 <= eb.t - ea.t < 0.01 + 1e-12
     # G on its collar while open, sliding against the spring while closed

@@ -1,0 +1,114 @@
+"""Time this working tree against an earlier revision, side by side in one run.
+
+The earlier revision is unpacked from git (``git archive``) into a temporary directory and
+both versions run the same job in alternating fresh subprocesses (so neither warms the
+other's caches and a busy machine slows both alike); each subprocess takes the best of
+``--repeat`` warm runs. The script also checks that both give the same events (1e-9 s) and
+the same driving effort (1e-9 N m) and prints the ratio of the medians::
+
+    python validation/before_after.py                       # against version 1 (1d28c89)
+    python validation/before_after.py --before HEAD~3 --model models/nipper_swing.toml
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The last commit of version 1: before the run driver and event policy were rebuilt.
+VERSION_1 = "1d28c89"
+
+JOB = r"""
+import json, sys, time, gc
+import numpy as np
+import cmm_dae as cd
+mech = cd.load(sys.argv[1])
+t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+model = cd.Model(mech)
+run = lambda: cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2, model=model)
+res = run()
+best = float("inf")
+for _ in range(repeat):
+    gc.collect()
+    t0 = time.perf_counter()
+    res = run()
+    best = min(best, time.perf_counter() - t0)
+drv = res.meta["drivers"][0] if res.meta["drivers"] else None
+print(json.dumps({"wall": best, "events": [[e.kind, e.joint, e.t] for e in res.events],
+                  "t": res.t.tolist(),
+                  "effort": res.driver(drv).effort.tolist() if drv else [],
+                  "steps": res.stats.steps}))
+"""
+
+
+def unpack(rev: str, where: Path) -> Path:
+    """The package of revision ``rev`` as files under ``where``."""
+    tar = where / "rev.tar"
+    subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", "-o", str(tar), rev,
+                    "cmm_dae"], check=True)
+    with tarfile.open(tar) as tf:
+        tf.extractall(where, filter="data")
+    return where
+
+
+def job(pythonpath: Path, model: Path, t_end: float, rtol: float, repeat: int) -> dict:
+    env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", JOB, str(model), str(t_end), str(rtol),
+                          str(repeat)], capture_output=True, text=True, env=env, check=True,
+                         cwd=pythonpath)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--before", default=VERSION_1, help=f"git revision (default {VERSION_1})")
+    ap.add_argument("--model", default=str(ROOT / "models" / "double_folded.toml"))
+    ap.add_argument("--t-end", type=float, default=10.0)
+    ap.add_argument("--rtol", type=float, default=1e-8)
+    ap.add_argument("--rounds", type=int, default=5, help="alternating subprocess pairs")
+    ap.add_argument("--repeat", type=int, default=5, help="warm runs per subprocess")
+    a = ap.parse_args(argv)
+    model = Path(a.model).resolve()
+    with tempfile.TemporaryDirectory() as tmp:
+        old = unpack(a.before, Path(tmp))
+        walls: dict[str, list[float]] = {"before": [], "after": []}
+        last: dict[str, dict] = {}
+        for _ in range(a.rounds):
+            for name, path in (("before", old), ("after", ROOT)):
+                r = job(path, model, a.t_end, a.rtol, a.repeat)
+                walls[name].append(r["wall"])
+                last[name] = r
+    b, n = last["before"], last["after"]
+    same_kinds = [e[:2] for e in b["events"]] == [e[:2] for e in n["events"]]
+    dt_ev = max((abs(x[2] - y[2]) for x, y in zip(b["events"], n["events"], strict=False)),
+                default=0.0)
+    import numpy as np
+
+    if b["t"] == n["t"]:  # same samples (event samples included): compare them one by one
+        d_eff = float(np.max(np.abs(np.array(b["effort"]) - np.array(n["effort"])),
+                             initial=0.0))
+    else:
+        print(f"the sample times differ ({len(b['t'])} and {len(n['t'])} samples)")
+        d_eff = float("inf")
+    mb, mn = statistics.median(walls["before"]), statistics.median(walls["after"])
+    print(f"model {model.name}, t_end {a.t_end} s, rtol {a.rtol:g}; {a.rounds} alternating "
+          f"rounds, best of {a.repeat} warm runs each")
+    print(f"before ({a.before}): median {mb * 1e3:.2f} ms  "
+          f"[{', '.join(f'{w * 1e3:.1f}' for w in walls['before'])}]  steps {b['steps']}")
+    print(f"after  (working tree): median {mn * 1e3:.2f} ms  "
+          f"[{', '.join(f'{w * 1e3:.1f}' for w in walls['after'])}]  steps {n['steps']}")
+    print(f"ratio before/after: {mb / mn:.3f}")
+    print(f"same event sequence: {same_kinds}; largest event-time difference {dt_ev:.2e} s; "
+          f"largest driving-effort difference {d_eff:.2e}")
+    return 0 if same_kinds and dt_ev <= 1e-9 and d_eff <= 1e-9 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
