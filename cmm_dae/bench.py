@@ -12,7 +12,7 @@ from pathlib import Path
 
 from .equations import Model
 from .loader import load
-from .runner import run_dae, run_iterative
+from .runner import simulate
 
 
 def _best(fn, repeat: int) -> tuple[float, object]:
@@ -47,9 +47,10 @@ def bench_models(models: list[Path], *, t_end: float = 10.0, rtol: float = 1e-8,
         model = Model(mech)
         build = time.perf_counter() - t0
         runs = {
-            "IDA": lambda m=mech, mo=model: run_dae(m, t_end, rtol=rtol, atol=rtol * 1e-2,
-                                                     model=mo),
-            "iterative": lambda m=mech, mo=model: run_iterative(m, t_end, dt=dt, model=mo),
+            "IDA": lambda m=mech, mo=model: simulate(m, t_end, rtol=rtol, atol=rtol * 1e-2,
+                                                      model=mo),
+            "iterative": lambda m=mech, mo=model: simulate(m, t_end, method="iterative", dt=dt,
+                                                            model=mo),
         }
         for method, fn in runs.items():
             wall, res = _best(fn, repeat)

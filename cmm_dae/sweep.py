@@ -162,12 +162,12 @@ def default_metrics(res: Result) -> dict[str, float]:
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
              metrics: Metric | None, run_options: dict[str, Any]) -> dict[str, Any]:
     """One sweep row; never raises for a failing variant (status and message say why)."""
-    from .runner import run_dae
+    from .runner import simulate
 
     row: dict[str, Any] = dict(values)
     t0 = time.perf_counter()
     try:
-        res = run_dae(with_params(mech, values), t_end, throw=False, **run_options)
+        res = simulate(with_params(mech, values), t_end, throw=False, **run_options)
         row.update((metrics or default_metrics)(res))
         row["status"] = "success" if res.success else "failed"
         row["message"] = "" if res.success else " ".join(res.message.split())
@@ -327,7 +327,7 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
           *, t_end: float, metrics: Metric | None = None, client: Any = None,
           workers: int | None = None, checkpoint: str | Path | None = None,
           progress: bool | None = None, **run_options: Any) -> SweepTable:
-    """Run ``run_dae`` over parameter variants of ``mech``.
+    """Run :func:`cmm_dae.simulate` over parameter variants of ``mech``.
 
     Parameters
     ----------
@@ -346,7 +346,7 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
     progress : bool or None
         A progress bar on stderr (default: for 20 or more cases on a terminal).
     **run_options
-        Passed to :func:`cmm_dae.run_dae` (rtol, atol, output_dt, ...).
+        Passed to :func:`cmm_dae.simulate` (method, rtol, atol, output_dt, dt, ...).
 
     Returns
     -------
