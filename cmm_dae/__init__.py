@@ -20,7 +20,20 @@ from .errors import (
     Status,
 )
 from .loader import from_dict, load
-from .mechanism import Body, Damper, Driver, Initial, Joint, Limits, Mechanism, Spring
+from .mechanism import (
+    Body,
+    Damper,
+    Driver,
+    Element,
+    Initial,
+    Joint,
+    Law,
+    Limits,
+    Load,
+    Mechanism,
+    Spring,
+    Zone,
+)
 from .report import Comparison, compare
 from .result import Configuration, Event, Result, Stats, load_result
 from .runner import METHODS, run_dae, run_iterative, simulate
@@ -29,11 +42,12 @@ from .studies import Convergence, WorkPrecision, convergence, work_precision
 from .sweep import SweepTable, sweep, with_params
 
 __all__ = [
-    "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "Comparison",
-    "Configuration", "Convergence", "Damper", "Driver", "Event", "Group", "Initial", "Joint",
-    "Limits", "Mechanism", "Model", "ModelError", "Problem", "Result", "SolverError", "Spring",
-    "Stats", "Status", "Structure", "SweepTable", "WorkPrecision", "compare", "convergence",
-    "from_dict", "labeller", "load", "load_result", "run_dae", "run_iterative", "simulate",
-    "structure", "sweep", "with_params", "work_precision",
+    "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
+    "Configuration", "Convergence", "convergence", "Damper", "Driver", "Element", "Event",
+    "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load", "Load",
+    "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",
+    "run_iterative", "simulate", "SolverError", "Spring", "Stats", "Status", "Structure",
+    "structure", "sweep", "SweepTable", "with_params", "work_precision", "WorkPrecision",
+    "Zone",
 ]
 __version__ = "0.1.0"

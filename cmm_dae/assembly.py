@@ -13,7 +13,7 @@ from scipy.optimize import least_squares
 
 from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
-from .events import HybridState
+from .events import HybridState, initial_zones
 from .result import Event
 
 #: Position residual (m or rad) below which a loop counts as closed.
@@ -159,6 +159,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
         rates = dict(ini.velocities)
     q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
     v = assemble_velocities(model, q, t0, hs.p, rates)
+    hs.zones = initial_zones(model, q)
     c0 = model.joint_rates(q, v)[0]
     beyond = []
     for name in model.locks:

@@ -20,6 +20,7 @@ This is the only module besides ``dae`` that imports CasADi.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -27,7 +28,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.linalg.lapack import dgesv
 
-from .mechanism import GROUND, Driver, Mechanism
+from .mechanism import GROUND, Driver, Law, Mechanism
 
 
 def _rot(th):
@@ -43,16 +44,35 @@ def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
         return sum(c * t**k for k, c in enumerate(d.coefficients))
     if d.motion == "harmonic":
         return d.initial + d.amplitude * ca.sin(2 * np.pi * d.frequency * t + d.phase)
-    # Clamped cubic spline (zero end slopes): C2 inside the table; held at the last value
-    # after it (C1 there, thanks to the zero end slope).
-    sp = CubicSpline(np.array(d.times), np.array(d.values), bc_type="clamped")
+    return spline_expr(d.times, d.values, t)
+
+
+def law_expr(law: Law, t: ca.SX, rate: ca.SX | None = None) -> ca.SX:
+    """The value of a load law as a CasADi expression (``rate``: the loaded joint's rate,
+    for a motor)."""
+    if law.kind == "constant":
+        return ca.SX(law.value)
+    if law.kind == "polynomial":
+        return sum(c * t**k for k, c in enumerate(law.coefficients))
+    if law.kind == "harmonic":
+        return law.mean + law.amplitude * ca.sin(2 * np.pi * law.frequency * t + law.phase)
+    if law.kind == "table":
+        return spline_expr(law.times, law.values, t)
+    return law.stall * (1 - rate / law.no_load_speed)  # motor
+
+
+def spline_expr(times, values, t: ca.SX) -> ca.SX:
+    """Clamped cubic spline (zero end slopes) through a table as a CasADi expression: C2
+    inside the table; held at the last value after it (C1 there, thanks to the zero end
+    slope). Shared by driver and load tables."""
+    sp = CubicSpline(np.array(times), np.array(values), bc_type="clamped")
     f = None
     for i, t0 in enumerate(sp.x[:-1]):
         c = sp.c[:, i]
         s = t - t0
         piece = ((c[0] * s + c[1]) * s + c[2]) * s + c[3]
         f = piece if f is None else ca.if_else(t >= t0, piece, f)
-    return ca.if_else(t >= sp.x[-1], float(d.values[-1]), f)
+    return ca.if_else(t >= sp.x[-1], float(values[-1]), f)
 
 
 class Buffered:
@@ -206,7 +226,12 @@ class Model:
         a = ca.SX.sym("a", nq)
         t = ca.SX.sym("t")
         nl = len(self.locks)
-        p = ca.SX.sym("p", 2 * nl)
+        #: loads that act in a zone only, in the order of their switches in ``p``
+        self.zoned = [n for n, ld in mech.loads.items() if ld.zone is not None]
+        nz = len(self.zoned)
+        p = ca.SX.sym("p", 2 * nl + nz)
+        #: length of a configuration's parameter vector (lock switches and values, zones)
+        self.n_params = int(p.numel())
         self._sym = (q, v, t, p)
 
         def angle(body):
@@ -275,6 +300,56 @@ class Model:
                 Qf += c_q[k, :].T * gen
         cddot = c_q @ a + ca.jacobian(cdot, q) @ v
 
+        # Applied loads: a law times a joint direction, a point force or a body moment.
+        self.load_names = list(mech.loads)
+        self.zone_info: dict[str, tuple[int, float, float]] = {}
+        load_val, load_pow = [], []
+        for name, ld in mech.loads.items():
+            k = jidx[ld.joint] if ld.joint is not None else None
+            val = law_expr(ld.law, t, cdot[k] if k is not None else None)
+            if ld.zone is not None:
+                zj = jidx[ld.zone.joint if ld.zone.joint is not None else ld.joint]
+                self.zone_info[name] = (zj, -math.inf if ld.zone.lower is None
+                                        else ld.zone.lower,
+                                        math.inf if ld.zone.upper is None else ld.zone.upper)
+                val = val * p[2 * nl + self.zoned.index(name)]
+            if k is not None:
+                Qf += c_q[k, :].T * val
+                power = val * cdot[k]
+            else:
+                i = self.bidx[ld.body]
+                om = v[3 * i + 2]
+                if ld.point is None:
+                    Qf[3 * i + 2] += val
+                    power = val * om
+                else:
+                    dvec = np.array(ld.direction, float) / math.hypot(*ld.direction)
+                    dirn = ca.DM(dvec) if ld.frame == "global" else \
+                        _rot(q[3 * i + 2]) @ ca.DM(dvec)
+                    F = dirn * val
+                    r = point(f"{ld.body}.{ld.point}") - q[3 * i:3 * i + 2]
+                    Qf[3 * i] += F[0]
+                    Qf[3 * i + 1] += F[1]
+                    Qf[3 * i + 2] += r[0] * F[1] - r[1] * F[0]
+                    vP = v[3 * i:3 * i + 2] + om * ca.vertcat(-r[1], r[0])
+                    power = ca.dot(F, vP)
+            load_val.append(val)
+            load_pow.append(power)
+
+        # Force elements between two points: tension pulls the points together.
+        self.element_names = list(mech.elements)
+        el_len, el_rate, el_ten = [], [], []
+        for el in mech.elements.values():
+            dvec = point(el.second) - point(el.first)
+            L = ca.sqrt(ca.dot(dvec, dvec))
+            L_q = ca.jacobian(L, q)
+            Ld = L_q @ v
+            T = el.preload + el.stiffness * (L - el.rest) + el.damping * Ld
+            Qf -= L_q.T * T
+            el_len.append(L)
+            el_rate.append(Ld)
+            el_ten.append(T)
+
         # Points where joint forces are reported: each joint's second (or first) connect point.
         ref_pts = []
         for j in mech.joints.values():
@@ -289,6 +364,14 @@ class Model:
                                                      dn(c_q)])
         self.kkt_fn = ca.Function("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)])
         self.post_fn = ca.Function("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)])
+
+        def col(xs):
+            return dn(ca.vertcat(*xs)) if xs else ca.SX(0, 1)
+
+        #: element lengths, rates, tensions; load values and powers (Result series)
+        self.extras_fn = ca.Function("extras", [q, v, t, p],
+                                     [col(el_len), col(el_rate), col(el_ten), col(load_val),
+                                      col(load_pow)])
         self.free_fn = ca.Function("free", [p], [dn(free)])
         # single-point evaluations for the step-by-step paths (private: callers use the
         # named methods below)
@@ -368,14 +451,17 @@ class Model:
         return Constraints(phi, Phi_q, Phi_t), c, c_q
 
     # ------------------------------------------------------------------ helpers
-    def params(self, locked: dict[str, float] | None = None) -> np.ndarray:
-        """Parameter vector for a configuration: ``locked`` maps joint -> lock value."""
+    def params(self, locked: dict[str, float] | None = None, zones=()) -> np.ndarray:
+        """Parameter vector for a configuration: ``locked`` maps joint -> lock value;
+        ``zones`` names the zoned loads acting."""
         nl = len(self.locks)
-        p = np.zeros(2 * nl)
+        p = np.zeros(self.n_params)
         for name, val in (locked or {}).items():
             k = self.locks.index(name)
             p[k] = 1.0
             p[nl + k] = val
+        for name in zones:
+            p[2 * nl + self.zoned.index(name)] = 1.0
         return p
 
     def rows_of(self, kind: str, name: str) -> list[int]:

@@ -85,6 +85,7 @@ class HybridState:
     model: Model
     labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
     locked: dict[str, str] = field(default_factory=dict)
+    zones: frozenset[str] = frozenset()  # zoned loads acting now
     force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
     configurations: list[Configuration] = field(default_factory=list)
     params: list[np.ndarray] = field(default_factory=list)
@@ -97,25 +98,29 @@ class HybridState:
         lim = self.model.mech.joints[joint].limits
         return lim.lower if side == "lower" else lim.upper
 
-    def params_of(self, locked: Locked) -> np.ndarray:
-        """Parameter vector of any lock set (cached; a trial set is not registered)."""
-        key = _key(locked)
+    def params_of(self, locked: Locked, zones: frozenset[str] | None = None) -> np.ndarray:
+        """Parameter vector of any lock set (cached; a trial set is not registered), with
+        the zoned loads ``zones`` acting (default: those acting now)."""
+        zones = self.zones if zones is None else zones
+        key = (_key(locked), tuple(sorted(zones)))
         p = self._trial.get(key)
         if p is None:
             p = self._trial[key] = self.model.params(
-                {j: self.limit_value(j, s) for j, s in locked.items()})
+                {j: self.limit_value(j, s) for j, s in locked.items()}, zones)
         return p
 
-    def index_of(self, locked: Locked) -> int:
-        """Index of the configuration of ``locked`` (registered, labelled, on first use)."""
-        key = _key(locked)
+    def index_of(self, locked: Locked, zones: frozenset[str] | None = None) -> int:
+        """Index of the configuration of ``locked`` with ``zones`` acting (registered,
+        labelled, on first use)."""
+        zones = self.zones if zones is None else zones
+        key = (_key(locked), tuple(sorted(zones)))
         if key not in self._index:
-            locked = dict(key)
+            locked = dict(key[0])
             label, dof = self.labeller(locked) if self.labeller else ("", 0)
             self._index[key] = len(self.configurations)
             self.configurations.append(Configuration(
-                tuple(locked), tuple(locked.values()), dof, label))
-            self.params.append(self.params_of(locked))
+                tuple(locked), tuple(locked.values()), dof, label, key[1]))
+            self.params.append(self.params_of(locked, zones))
         return self._index[key]
 
     def current(self) -> int:
@@ -147,8 +152,9 @@ class HybridState:
 # ------------------------------------------------------------------- detection
 def event_list(model: Model, locked: Locked) -> list[Trigger]:
     """The triggers watched in configuration ``locked``: a ``gap`` for each open limit side
-    of an unlocked joint, a ``push`` for each locked joint. All cross zero downwards."""
-    out = []
+    of an unlocked joint, a ``push`` for each locked joint, a ``zone`` for each load that
+    acts in a zone (``joint`` holds the load's name). All cross zero downwards."""
+    out = [Trigger(name, "", "zone") for name in model.zoned]
     for name in model.locks:
         if name in locked:
             out.append(Trigger(name, locked[name], "push"))
@@ -171,7 +177,9 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
     +1 is never a downward crossing. A push needs the multipliers ``lam`` of a KKT solve."""
     jidx = hs.model.jidx
     for i, tr in enumerate(triggers):
-        if tr.kind == "gap":
+        if tr.kind == "zone":
+            out[i] = _zone_margin(hs, tr.joint, c)
+        elif tr.kind == "gap":
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
             if tr.side == "lower":
@@ -194,6 +202,10 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
     lam = None
     out = []
     for tr in triggers:
+        if tr.kind == "zone":
+            if _zone_margin(hs, tr.joint, c) < 0.0:
+                out.append(tr)
+            continue
         k = model.jidx[tr.joint]
         if tr.kind == "gap":
             L = hs.limit_value(tr.joint, tr.side)
@@ -208,6 +220,44 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
             if hs.push(lam, tr.joint) < 0.0:
                 out.append(tr)
     return out
+
+
+def _zone_margin(hs: HybridState, load: str, c: np.ndarray) -> float:
+    """Distance of a zone's joint coordinate to the nearer zone edge, positive while the
+    load's acting state matches where the coordinate is (acting inside, idle outside)."""
+    k, lo, up = hs.model.zone_info[load]
+    inside = min(c[k] - lo, up - c[k])
+    return inside if load in hs.zones else -inside
+
+
+def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: float
+                ) -> Transition | None:
+    """A load's zone edge reached: it starts or stops acting. At a located root (the
+    coordinate on the edge) the direction of motion decides; after a finite step, where
+    the coordinate is. None when nothing changes (a round-off root)."""
+    model = hs.model
+    k, lo, up = model.zone_info[load]
+    c, cd = model.joint_rates(q, v)
+    tol = 1e-9 * (1.0 + abs(c[k]))
+    if abs(c[k] - lo) <= tol:
+        inside = cd[k] > 0.0
+    elif abs(c[k] - up) <= tol:
+        inside = cd[k] < 0.0
+    else:
+        inside = lo <= c[k] <= up
+    if inside == (load in hs.zones):
+        return None
+    before = hs.current()
+    hs.zones = hs.zones | {load} if inside else hs.zones - {load}
+    name = model.joint_names[k]
+    return Transition(Event(t, "zone", name, "enter" if inside else "leave", before,
+                            hs.current(), float(cd[k]), float(cd[k]), load=load), q, v)
+
+
+def initial_zones(model: Model, q: np.ndarray) -> frozenset[str]:
+    """The zoned loads whose zone holds the joint coordinate at q (edges included)."""
+    c = model.joint_rates(q, np.zeros_like(q))[0]
+    return frozenset(n for n, (k, lo, up) in model.zone_info.items() if lo <= c[k] <= up)
 
 
 # ------------------------------------------------------------------- geometry
@@ -324,6 +374,9 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
            policy: Policy) -> list[Transition]:
     """Decide what a trigger does and apply it to ``hs``; returns the transitions in order
     (none when the trigger is rejected or the joint stays locked)."""
+    if tr.kind == "zone":
+        done = zone_switch(hs, tr.joint, q, v, t)
+        return [done] if done is not None else []
     if not confirm(hs, tr, q, v, t, policy):
         return []
     if tr.kind == "gap":

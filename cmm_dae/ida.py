@@ -65,7 +65,7 @@ class IdaIntegrator(Integrator):
         nq = model.nq
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)
-        self.p = np.zeros(2 * len(model.locks))
+        self.p = np.zeros(model.n_params)
         self.res = Buffered(model.res_fn)
         self.res.bind(0, self.t_arr)
         self.res.bind(3, self.p)
@@ -190,7 +190,9 @@ class IdaIntegrator(Integrator):
             outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
         tspan = np.concatenate([[t0], outs])
         extra = None
-        if tspan.size == 2:  # scikit-sundae returns internal steps for a 2-point tspan
+        # scikit-sundae returns IDA's internal steps for a 2-point tspan: that is what
+        # output_dt=None asks for; on a grid, a midpoint (dropped again) avoids it
+        if tspan.size == 2 and opts.output_dt is not None:
             extra = 0.5 * (tspan[0] + tspan[1])
             tspan = np.array([tspan[0], extra, tspan[1]])
         # IDA evaluates the root functions at output times too: not steps

@@ -16,15 +16,20 @@ from typing import Any
 
 from .errors import ModelError, Problem
 from .mechanism import (
+    LAWS,
     MOTIONS,
     Body,
     Damper,
     Driver,
+    Element,
     Initial,
     Joint,
+    Law,
     Limits,
+    Load,
     Mechanism,
     Spring,
+    Zone,
     validate,
 )
 
@@ -32,10 +37,20 @@ _REQUIRED = object()
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
 MAX_FILE_BYTES = 16 * 2**20
 
-TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "initial")
+TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "loads", "elements",
+            "initial")
 MECH_KEYS = ("name", "gravity")
 BODY_KEYS = ("mass", "inertia", "inertia_about", "centroid", "points", "guess")
 JOINT_KEYS = ("type", "connects", "axis", "angle", "limits", "restitution", "spring", "damper")
+LAW_KEYS = {
+    "constant": ("value",),
+    "polynomial": ("coefficients",),
+    "harmonic": ("mean", "amplitude", "frequency", "phase"),
+    "table": ("times", "values"),
+    "motor": ("stall", "no_load_speed"),
+}
+LOAD_KEYS = ("joint", "body", "point", "direction", "frame", "law", "zone")
+ELEMENT_KEYS = ("connects", "stiffness", "rest", "damping", "preload")
 DRIVER_KEYS = {
     "constant_speed": ("motion", "initial", "speed"),
     "polynomial": ("motion", "coefficients"),
@@ -194,6 +209,8 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     bodies = [_body(r, k, v) for k, v in r.sub("", data, "bodies").items()]
     joints = [_joint(r, k, v) for k, v in r.sub("", data, "joints").items()]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
+    loads = [_load(r, k, v) for k, v in r.sub("", data, "loads").items()]
+    elements = [_element(r, k, v) for k, v in r.sub("", data, "elements").items()]
 
     ini = r.keys("initial", r.sub("", data, "initial"), ("joints", "velocities"))
     ij = {k: r._num("initial", f"joints.{k}", v)
@@ -206,7 +223,8 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
         # Bad values were replaced by NaN above, so validation would repeat them: build
         # without validating, then report only what the reader did not already say.
         m = Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
-                      initial=Initial(ij, iv), gravity=gravity, source=source, check=False)
+                      initial=Initial(ij, iv), gravity=gravity, source=source, loads=loads,
+                      elements=elements, check=False)
         seen = {(p.table, p.key.split("[")[0]) for p in problems}
         problems += [p for p in validate(m) if (p.table, p.key) not in seen
                      and (p.table, p.key.split(".")[0]) not in seen]
@@ -279,6 +297,64 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
         dt = r.keys(f"{t}.damper", r.sub(t, d, "damper"), ("damping",))
         damper = Damper(r.num(f"{t}.damper", dt, "damping"))
     return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper)
+
+
+def _connects(r: _Reader, t: str, d: dict) -> tuple[str, str]:
+    conn = d.get("connects")
+    if conn is None:
+        r.bad(t, "connects", "missing (expected [\"body.point\", \"body.point\"])")
+    elif not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str)
+                                                                for c in conn)):
+        r.bad(t, "connects", f"expected two strings \"body.point\", got {_short(conn)}")
+    else:
+        return conn[0], conn[1]
+    return "?.?", "?.?"
+
+
+def _law(r: _Reader, t: str, d: dict) -> Law:
+    kind = r.string(t, d, "law")
+    if kind not in LAWS:
+        if kind:
+            close = difflib.get_close_matches(kind, LAWS, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            r.bad(t, "law", f"expected one of {', '.join(LAWS)}, got {kind!r}{hint}")
+        return Law("constant")
+    r.keys(t, d, LOAD_KEYS + LAW_KEYS[kind])
+    if kind == "constant":
+        return Law(kind, value=r.num(t, d, "value"))
+    if kind == "polynomial":
+        return Law(kind, coefficients=r.vec(t, d, "coefficients", None))
+    if kind == "harmonic":
+        return Law(kind, mean=r.num(t, d, "mean", 0.0), amplitude=r.num(t, d, "amplitude"),
+                   frequency=r.num(t, d, "frequency"), phase=r.num(t, d, "phase", 0.0))
+    if kind == "table":
+        return Law(kind, times=r.vec(t, d, "times", None), values=r.vec(t, d, "values", None))
+    return Law(kind, stall=r.num(t, d, "stall"), no_load_speed=r.num(t, d, "no_load_speed"))
+
+
+def _load(r: _Reader, name: str, d: Any) -> Load:
+    t = f"loads.{name}"
+    if not isinstance(d, dict):
+        r.bad(t, "", f"expected a table, got {_short(d)}")
+        return Load(name, Law())
+    law = _law(r, t, d)
+    zone = None
+    if "zone" in d:
+        zt = r.keys(f"{t}.zone", r.sub(t, d, "zone"), ("joint", "lower", "upper"))
+        zone = Zone(r.string(f"{t}.zone", zt, "joint", None),
+                    r.num(f"{t}.zone", zt, "lower", None), r.num(f"{t}.zone", zt, "upper", None))
+    return Load(name, law, joint=r.string(t, d, "joint", None), body=r.string(t, d, "body", None),
+                point=r.string(t, d, "point", None),
+                direction=r.vec(t, d, "direction", 2, default=None),
+                frame=r.string(t, d, "frame", "global"), zone=zone)
+
+
+def _element(r: _Reader, name: str, d: Any) -> Element:
+    t = f"elements.{name}"
+    d = r.keys(t, d, ELEMENT_KEYS)
+    first, second = _connects(r, t, d)
+    return Element(name, first, second, r.num(t, d, "stiffness", 0.0), r.num(t, d, "rest", 0.0),
+                   r.num(t, d, "damping", 0.0), r.num(t, d, "preload", 0.0))
 
 
 def _driver(r: _Reader, name: str, d: Any) -> Driver:

@@ -7,6 +7,7 @@ of its own frame, the frame its ``points`` and ``centroid`` are written in.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import InitVar, dataclass, field
 from types import MappingProxyType
 from typing import Literal
@@ -16,6 +17,8 @@ from .errors import ModelError, Problem
 GROUND = "ground"
 JOINT_TYPES = ("revolute", "prismatic")
 MOTIONS = ("constant_speed", "polynomial", "harmonic", "table")
+LAWS = ("constant", "polynomial", "harmonic", "table", "motor")
+FRAMES = ("global", "body")
 
 Vec2 = tuple[float, float]
 
@@ -182,6 +185,100 @@ class Driver:
 
 
 @dataclass(frozen=True)
+class Law:
+    """A scalar law of a load: of time, and for ``motor`` of the loaded joint's rate.
+
+    kind : {"constant", "polynomial", "harmonic", "table", "motor"}
+        ``constant``: ``value``; ``polynomial``: ``sum coefficients[k] t^k``;
+        ``harmonic``: ``mean + amplitude sin(2 pi frequency t + phase)``;
+        ``table``: C2 cubic spline through ``times``/``values`` (zero end slopes), held at
+        the last value after the last time; ``motor``: ``stall (1 - rate / no_load_speed)``
+        with the rate of the loaded joint (a motor's torque-speed line).
+    func : callable or None
+        From Python only: ``func(t, coordinate, rate) -> float`` replaces the law (its
+        derivatives are taken by finite differences); never a string.
+    Units: those of the load (N, N m), s, Hz, rad.
+    """
+
+    kind: str = "constant"
+    value: float = 0.0
+    coefficients: tuple[float, ...] = ()
+    mean: float = 0.0
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+    stall: float = 0.0
+    no_load_speed: float = 0.0
+    func: Callable[[float, float, float], float] | None = field(default=None, compare=False)
+
+
+@dataclass(frozen=True)
+class Zone:
+    """Where a load acts: while joint ``joint`` (default: the loaded joint) lies in
+    [``lower``, ``upper``] (rad or m; either may be None, open on that side)."""
+
+    joint: str | None = None
+    lower: float | None = None
+    upper: float | None = None
+
+
+@dataclass(frozen=True)
+class Load:
+    """An applied load: a scalar :class:`Law` times what it acts on.
+
+    On a joint coordinate (``joint``): a torque (revolute, N m) or force (prismatic, N),
+    positive along the coordinate on the second body, negative on the first. At a body
+    point (``body`` and ``point``): a force ``law * direction`` (N; ``direction``
+    normalised, in the ``"global"`` or the ``"body"`` frame). On a body without a point: a
+    pure moment (N m, counter-clockwise positive). ``zone`` limits where it acts.
+    """
+
+    name: str
+    law: Law
+    joint: str | None = None
+    body: str | None = None
+    point: str | None = None
+    direction: Vec2 | None = None
+    frame: str = "global"
+    zone: Zone | None = None
+
+    @property
+    def target(self) -> str:
+        """``"joint"``, ``"point"`` or ``"moment"``."""
+        if self.joint is not None:
+            return "joint"
+        return "point" if self.point is not None else "moment"
+
+
+@dataclass(frozen=True)
+class Element:
+    """Spring-damper-actuator between two points of any two bodies (ground included).
+
+    Tension ``preload + stiffness (L - rest) + damping L'`` (N) with L the distance of the
+    points (m); a positive tension pulls the points together. stiffness N/m, rest m,
+    damping N s/m, preload N.
+    """
+
+    name: str
+    first: str
+    second: str
+    stiffness: float = 0.0
+    rest: float = 0.0
+    damping: float = 0.0
+    preload: float = 0.0
+
+    @property
+    def first_body(self) -> str:
+        return self.first.split(".", 1)[0]
+
+    @property
+    def second_body(self) -> str:
+        return self.second.split(".", 1)[0]
+
+
+@dataclass(frozen=True)
 class Initial:
     """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s)."""
 
@@ -212,6 +309,8 @@ class Mechanism:
     initial: Initial = field(default_factory=Initial)
     gravity: Vec2 = (0.0, -9.81)
     source: str | None = None
+    loads: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    elements: MappingProxyType = field(default_factory=lambda: _frozen({}))
     check: InitVar[bool] = True
 
     def __post_init__(self, check: bool) -> None:
@@ -237,6 +336,8 @@ class Mechanism:
         object.__setattr__(self, "bodies", as_map(self.bodies, "name", "bodies"))
         object.__setattr__(self, "joints", as_map(self.joints, "name", "joints"))
         object.__setattr__(self, "drivers", as_map(self.drivers, "joint", "drivers"))
+        object.__setattr__(self, "loads", as_map(self.loads, "name", "loads"))
+        object.__setattr__(self, "elements", as_map(self.elements, "name", "elements"))
         object.__setattr__(self, "ground", _frozen(
             {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
         object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
@@ -246,7 +347,17 @@ class Mechanism:
 
     def __reduce__(self):
         return (_rebuild, (self.name, dict(self.bodies), dict(self.joints), dict(self.ground),
-                           dict(self.drivers), self.initial, self.gravity, self.source))
+                           dict(self.drivers), self.initial, self.gravity, self.source,
+                           dict(self.loads), dict(self.elements)))
+
+    def replace(self, **changes) -> Mechanism:
+        """A copy with some fields replaced (``bodies=``, ``loads=``, ...), validated."""
+        kw = dict(name=self.name, bodies=dict(self.bodies), joints=dict(self.joints),
+                  ground=dict(self.ground), drivers=dict(self.drivers), initial=self.initial,
+                  gravity=self.gravity, source=self.source, loads=dict(self.loads),
+                  elements=dict(self.elements))
+        kw.update(changes)
+        return Mechanism(**kw)
 
     @property
     def limited_joints(self) -> list[str]:
@@ -261,10 +372,12 @@ class Mechanism:
         return self.bodies[body].points[pt]
 
 
-def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source) -> Mechanism:
+def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source, loads=None,
+             elements=None) -> Mechanism:
     """Unpickling: the description was validated when it was first built."""
     return Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
-                     initial=initial, gravity=gravity, source=source, check=False)
+                     initial=initial, gravity=gravity, source=source, loads=loads or {},
+                     elements=elements or {}, check=False)
 
 
 def _finite(x) -> bool:
@@ -346,7 +459,104 @@ def validate(m: Mechanism) -> list[Problem]:
             out.append(Problem(t, "", f"joint '{name}' has limits: a driven joint cannot be "
                                "metamorphic"))
         out.extend(_check_driver(t, d))
+    for name, ld in m.loads.items():
+        out.extend(_check_load(m, f"loads.{name}", ld))
+    for name, el in m.elements.items():
+        t = f"elements.{name}"
+        _check_ref(m, t, "connects", el.first, out)
+        _check_ref(m, t, "connects", el.second, out)
+        if el.first_body == el.second_body:
+            out.append(Problem(t, "connects", f"both points are on body '{el.first_body}': "
+                               "the element would do nothing"))
+        for key in ("stiffness", "rest", "damping"):
+            val = getattr(el, key)
+            if not (_finite(val) and val >= 0):
+                out.append(Problem(t, key, f"expected a number >= 0, got {val}"))
+        if not _finite(el.preload):
+            out.append(Problem(t, "preload", f"expected a finite number, got {el.preload}"))
     _check_initial(m, out)
+    return out
+
+
+def _check_law(t: str, law: Law, target: str) -> list[Problem]:
+    out: list[Problem] = []
+    if law.func is not None:
+        if not callable(law.func):
+            out.append(Problem(t, "law", f"expected a callable f(t, coordinate, rate), got "
+                               f"{type(law.func).__name__}"))
+        return out
+    if law.kind not in LAWS:
+        out.append(Problem(t, "law", f"expected one of {', '.join(LAWS)}, got {law.kind!r}"))
+        return out
+    nums = {"constant": ("value",), "harmonic": ("mean", "amplitude", "frequency", "phase"),
+            "motor": ("stall", "no_load_speed")}.get(law.kind, ())
+    for key in nums:
+        if not _finite(getattr(law, key)):
+            out.append(Problem(t, key, f"expected a finite number, got {getattr(law, key)}"))
+    if law.kind == "polynomial" and not law.coefficients:
+        out.append(Problem(t, "coefficients", "expected at least one coefficient"))
+    if law.kind == "harmonic" and _finite(law.frequency) and law.frequency < 0:
+        out.append(Problem(t, "frequency", f"expected a frequency >= 0 Hz, got {law.frequency}"))
+    if law.kind == "table":
+        out.extend(_check_table(t, law.times, law.values))
+    if law.kind == "motor":
+        if target != "joint":
+            out.append(Problem(t, "law", "a motor law needs a joint rate: only a load on a "
+                               "joint coordinate can use it"))
+        if _finite(law.no_load_speed) and not law.no_load_speed > 0:
+            out.append(Problem(t, "no_load_speed", f"expected a positive speed (rad/s or "
+                               f"m/s), got {law.no_load_speed}"))
+    return out
+
+
+def _check_load(m: Mechanism, t: str, ld: Load) -> list[Problem]:
+    out: list[Problem] = []
+    if ld.joint is not None:
+        if ld.body is not None or ld.point is not None:
+            out.append(Problem(t, "joint", "a load acts on a joint or on a body, not both"))
+        if ld.joint not in m.joints:
+            out.append(Problem(t, "joint", f"unknown joint '{ld.joint}' "
+                               f"(joints: {', '.join(m.joints) or 'none'})"))
+    elif ld.body is None:
+        out.append(Problem(t, "", "give 'joint' (a load on a joint coordinate) or 'body' "
+                           "(a force at a point, or a moment)"))
+    elif ld.body not in m.bodies:
+        out.append(Problem(t, "body", f"unknown body '{ld.body}' "
+                           f"(bodies: {', '.join(m.bodies) or 'none'})"))
+    elif ld.point is not None and ld.point not in m.bodies[ld.body].points:
+        out.append(Problem(t, "point", f"body '{ld.body}' has no point '{ld.point}' "
+                           f"(its points: {', '.join(m.bodies[ld.body].points) or 'none'})"))
+    if ld.target == "point":
+        d = ld.direction
+        if d is None or not (all(_finite(x) for x in d) and math.hypot(*d) > 1e-12):
+            out.append(Problem(t, "direction", f"expected a non-zero direction [x, y], got {d}"))
+        if ld.frame not in FRAMES:
+            out.append(Problem(t, "frame", f"expected one of {', '.join(FRAMES)}, "
+                               f"got {ld.frame!r}"))
+    elif ld.direction is not None:
+        out.append(Problem(t, "direction", "only a force at a body point has a direction"))
+    out.extend(_check_law(t, ld.law, ld.target))
+    z = ld.zone
+    if z is not None:
+        zj = z.joint if z.joint is not None else ld.joint
+        if zj is None:
+            out.append(Problem(t, "zone.joint", "a load on a body needs the zone's joint"))
+        elif zj not in m.joints:
+            out.append(Problem(t, "zone.joint", f"unknown joint '{zj}'"))
+        elif z.lower is None and z.upper is None:
+            out.append(Problem(t, "zone", "give 'lower', 'upper' or both"))
+        elif z.lower is not None and z.upper is not None and not z.lower < z.upper:
+            out.append(Problem(t, "zone", f"lower ({z.lower}) must be below upper ({z.upper})"))
+        else:
+            lim = m.joints[zj].limits
+            lo = -math.inf if lim is None or lim.lower is None else lim.lower
+            up = math.inf if lim is None or lim.upper is None else lim.upper
+            zlo = -math.inf if z.lower is None else z.lower
+            zup = math.inf if z.upper is None else z.upper
+            if zup <= lo or zlo >= up:
+                out.append(Problem(t, "zone", f"[{z.lower}, {z.upper}] lies outside the "
+                                   f"limits [{lim.lower}, {lim.upper}] of joint '{zj}': "
+                                   "the load could never act"))
     return out
 
 
@@ -357,17 +567,21 @@ def _check_driver(t: str, d: Driver) -> list[Problem]:
     elif d.motion == "polynomial" and not d.coefficients:
         out.append(Problem(t, "coefficients", "expected at least one coefficient"))
     elif d.motion == "table":
-        if len(d.times) < 2 or len(d.times) != len(d.values):
-            out.append(Problem(t, "times", "expected 'times' and 'values' of equal length >= 2, "
-                               f"got {len(d.times)} and {len(d.values)}"))
-        elif any(b <= a for a, b in zip(d.times, d.times[1:], strict=False)):
-            out.append(Problem(t, "times", "expected strictly increasing times"))
-        elif d.times[0] != 0.0:
-            out.append(Problem(t, "times",
-                               f"the table must start at t = 0, starts at {d.times[0]}"))
+        out.extend(_check_table(t, d.times, d.values))
     elif d.motion == "harmonic" and not d.frequency >= 0:
         out.append(Problem(t, "frequency", f"expected a frequency >= 0 Hz, got {d.frequency}"))
     return out
+
+
+def _check_table(t: str, times: tuple, values: tuple) -> list[Problem]:
+    if len(times) < 2 or len(times) != len(values):
+        return [Problem(t, "times", "expected 'times' and 'values' of equal length >= 2, "
+                        f"got {len(times)} and {len(values)}")]
+    if any(b <= a for a, b in zip(times, times[1:], strict=False)):
+        return [Problem(t, "times", "expected strictly increasing times")]
+    if times[0] != 0.0:
+        return [Problem(t, "times", f"the table must start at t = 0, starts at {times[0]}")]
+    return []
 
 
 def _check_initial(m: Mechanism, out: list[Problem]) -> None:

@@ -64,6 +64,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         a, lam, Phi_q = batch_kkt(model, t, q, v, P)
         c, cd, cdd, pts = (np.asarray(x) for x in
                            model.mapped("post_fn", n)(q.T, v.T, a.T, t))
+        extras = [np.asarray(x).reshape(-1, n).T
+                  for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
         phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
         phi = np.asarray(phi_m[0]).T
         hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).T
@@ -75,6 +77,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         c = cd = cdd = np.zeros((nj, 0))
         pts = np.zeros((2, 0))
         phi = hvel = np.zeros((0, model.m))
+        ne, nld = len(model.element_names), len(model.load_names)
+        extras = [np.zeros((0, ne))] * 3 + [np.zeros((0, nld))] * 2
     free = np.array([model.free_rows(p) for p in params]).reshape(len(params), model.m)
     active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
@@ -105,6 +109,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
             "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
             "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel,
+            "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
+            "load_value": extras[3], "load_power": extras[4],
             "event_sample": (np.asarray(event_sample, int) if event_sample is not None
                              else np.zeros(0, int))}
     meta = {
@@ -122,6 +128,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                     if j.spring is not None},
         "dampers": {n: j.damper.damping for n, j in mech.joints.items() if j.damper is not None},
         "metamorphic": model.locks,
+        "elements": {n: [e.stiffness, e.rest, e.damping, e.preload]
+                     for n, e in mech.elements.items()},
+        "loads": model.load_names,
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},
         "ground": {k: list(v) for k, v in mech.ground.items()},

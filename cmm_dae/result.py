@@ -31,12 +31,15 @@ class Configuration:
         Degrees of freedom of the mechanism with its drivers removed (mobility).
     label : str
         The paper's name: non-collision, internal/external collision (joint ...).
+    zones : tuple[str, ...]
+        The loads with a zone that act in this configuration.
     """
 
     locked: tuple[str, ...]
     sides: tuple[str, ...]
     dof: int
     label: str
+    zones: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -49,11 +52,12 @@ class Event:
         Time, s.
     kind : str
         ``"limit"`` (reached a limit and locked), ``"bounce"`` (reached it and rebounded),
-        ``"lock"`` (locked without impact), ``"release"``.
+        ``"lock"`` (locked without impact), ``"release"``, ``"zone"`` (a load's zone
+        entered or left).
     joint : str
-        The metamorphic joint.
+        The metamorphic joint (for a zone: the joint whose coordinate defines it).
     side : str
-        ``"lower"`` or ``"upper"``.
+        ``"lower"`` or ``"upper"``; for a zone ``"enter"`` or ``"leave"``.
     before, after : int
         Configuration indices (into ``Result.configurations``).
     velocity_before, velocity_after : float
@@ -64,6 +68,8 @@ class Event:
         Kinetic energy lost in the impact, J.
     release_force : float
         Lock force/torque at a release (the value whose sign change released it), N or N m.
+    load : str
+        For a zone event, the load whose zone it is.
     """
 
     t: float
@@ -77,6 +83,7 @@ class Event:
     impulses: dict[str, float] = field(default_factory=dict)
     energy_lost: float = 0.0
     release_force: float = 0.0
+    load: str = ""
 
 
 @dataclass
@@ -121,6 +128,25 @@ class DriverSeries:
 
 
 @dataclass(frozen=True)
+class ElementSeries:
+    """A force element: ``length`` (n,) m, its ``rate`` (n,) m/s and ``tension`` (n,) N
+    (positive pulls the two points together)."""
+
+    length: np.ndarray
+    rate: np.ndarray
+    tension: np.ndarray
+
+
+@dataclass(frozen=True)
+class LoadSeries:
+    """An applied load: ``value`` (n,) N or N m (zero while outside its zone) and the
+    ``power`` (n,) W it puts into the mechanism."""
+
+    value: np.ndarray
+    power: np.ndarray
+
+
+@dataclass(frozen=True)
 class BodySeries:
     """Pose (n, 3) x m, y m, theta rad of the body frame; velocity and acceleration alike."""
 
@@ -141,6 +167,8 @@ class Energy:
     damper_dissipation: np.ndarray
     impact_losses: np.ndarray
     residual: np.ndarray
+    element: np.ndarray
+    load_work: np.ndarray
 
 
 def _cumulative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -239,7 +267,7 @@ class Result:
         return list(dict.fromkeys(int(c) for c in self.configuration))
 
     def _index(self, kind: str, name: str) -> int:
-        names = self.meta[kind]
+        names = list(self.meta.get(kind, []))
         if name not in names:
             raise CmmError(f"no {kind[:-1]} named {name!r} (known: {', '.join(names)})")
         return names.index(name)
@@ -250,6 +278,17 @@ class Result:
         d = self.data
         return JointSeries(d["c"][:, k], d["cd"][:, k], d["cdd"][:, k], d["jforce"][:, k, :],
                            d["jtorque"][:, k])
+
+    def element(self, name: str) -> ElementSeries:
+        """Time series of force element ``name``."""
+        k = self._index("elements", name)
+        d = self.data
+        return ElementSeries(d["elem_len"][:, k], d["elem_rate"][:, k], d["elem_tension"][:, k])
+
+    def load(self, name: str) -> LoadSeries:
+        """Time series of applied load ``name``."""
+        k = self._index("loads", name)
+        return LoadSeries(self.data["load_value"][:, k], self.data["load_power"][:, k])
 
     def driver(self, name: str) -> DriverSeries:
         """Time series of the driver of joint ``name``."""
@@ -280,9 +319,11 @@ class Result:
                 f"events={len(self.events)}, status={self.status!r})")
 
     def energy(self) -> Energy:
-        """Energy audit along the run (J): kinetic, potential (gravity), spring energy,
-        cumulative driver work, damper dissipation and impact losses, and the balance
-        residual ``work - (dT + dV_g + dV_s + dissipation + impact losses)``.
+        """Energy audit along the run (J): kinetic, potential (gravity), spring energy of
+        the joint springs, energy of the force elements (spring and preload), cumulative
+        driver work and load work, damper dissipation (joint and element dampers) and
+        impact losses, and the balance residual
+        ``work - (dT + dV_g + dV_s + dV_e + dissipation + impact losses)``.
 
         Integrals use Simpson's rule between event samples (the integrands jump there), so
         the residual measures both the solver and the output spacing.
@@ -300,10 +341,17 @@ class Result:
         P_diss = np.zeros(self.t.size)
         for name, c in m["dampers"].items():
             P_diss = P_diss + c * self.joint(name).velocity ** 2
+        Ve = np.zeros(self.t.size)
+        for k, (stiff, rest, damping, preload) in enumerate(m.get("elements", {}).values()):
+            L, Ld = d["elem_len"][:, k], d["elem_rate"][:, k]
+            Ve = Ve + 0.5 * stiff * (L - rest) ** 2 + preload * L
+            P_diss = P_diss + damping * Ld**2
         P_drv = np.zeros(self.t.size)
         for name in m["drivers"]:
             P_drv = P_drv + self.driver(name).effort * self.joint(name).velocity
         work = _cumulative(self.t, P_drv)
+        lw = _cumulative(self.t, np.sum(d["load_power"], axis=1)) if "load_power" in d \
+            else np.zeros(self.t.size)
         diss = _cumulative(self.t, P_diss)
         lost = np.zeros(self.t.size)
         after = d.get("event_sample", np.zeros(0, int))
@@ -316,9 +364,9 @@ class Result:
                 seen[e.t] = k + 1
                 i = int(np.searchsorted(self.t, e.t, side="left")) + k + 1
             lost[min(i, self.t.size):] += e.energy_lost
-        E = T + Vg + Vs
-        resid = work - (E - E[0]) - diss - lost
-        return Energy(self.t, T, Vg, Vs, work, diss, lost, resid)
+        E = T + Vg + Vs + Ve
+        resid = work + lw - (E - E[0]) - diss - lost
+        return Energy(self.t, T, Vg, Vs, work, diss, lost, resid, Ve, lw)
 
     # ------------------------------------------------------------------ tables
     def event_table(self) -> str:
@@ -413,7 +461,8 @@ def load_result(path: str | Path) -> Result:
             meta = json.loads(str(z["__meta__"]))
             data = {k: np.asarray(z[k]) for k in z.files if k != "__meta__"}
         configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), int(c["dof"]),
-                                 str(c["label"])) for c in meta.pop("configurations")]
+                                 str(c["label"]), tuple(c.get("zones", ())))
+                   for c in meta.pop("configurations")]
         events = [Event(**e) for e in meta.pop("events")]
         stats = Stats(**meta.pop("stats"))
         status = meta.pop("status")

@@ -1,0 +1,208 @@
+"""Applied loads and force elements against independent references: Andrews' squeezing
+mechanism against the Test Set for IVP Solvers, and a pendulum carrying every kind of load
+against a minimal-coordinate model integrated by DOP853."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import cmm_dae as cd
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+
+#: Test Set for IVP Solvers (CWI / Bari), problem "andrews": y(0.03), computed with PSIDE at
+#: tolerance 1e-14; the order of the benchmark's coordinates.
+ANDREWS_003 = {"beta": 0.1581077119629904e2, "Theta": -0.1575637105984298e2,
+               "gamma": 0.4082224013073101e-1, "Phi": -0.5347301163226948,
+               "delta": 0.5244099658805304, "Omega": 0.5347301163226948,
+               "epsilon": 0.1048080741042263e1}
+
+
+def test_andrews_squeezer_against_the_test_set():
+    mech = cd.load(MODELS / "andrews_squeezer.toml")
+    res = cd.run_dae(mech, 0.03, rtol=1e-10, atol=1e-12, output_dt=None)
+    err = {k: res.joint(k).position[-1] - v for k, v in ANDREWS_003.items()}
+    assert max(abs(e) for e in err.values()) <= 1e-7, err
+    # the audit books the motor's work and the spring's energy: it closes (the work is a
+    # Simpson quadrature over IDA's steps, the reference the exact product)
+    e = res.energy()
+    assert e.load_work[-1] == pytest.approx(0.033 * (res.joint("beta").position[-1]
+                                                     - res.joint("beta").position[0]),
+                                            rel=1e-9)
+    assert np.max(np.abs(e.residual)) <= 1e-8
+    s = res.element("spring")
+    assert s.tension == pytest.approx(4530.0 * (s.length - 0.07785), rel=1e-12, abs=1e-9)
+
+
+# --------------------------------------------------------------- loaded pendulum
+M, L, JC, RC = 0.5, 0.4, 0.5 * 0.4**2 / 12, 0.2   # rod mass, length, centroidal inertia
+S = (0.25, 0.3)                                     # ground end of the spring element
+K, REST, DAMP, PRE = 30.0, 0.15, 0.2, 1.5           # element
+STALL, W0 = 0.8, 6.0                                # motor on the pivot
+FB = 0.6                                            # body-frame tip force, N (frame y)
+FG = (0.6, -1.0)                                    # global tip force direction (1 N)
+MOM = (0.1, 0.05, 1.5, 0.3)                         # moment: mean, amplitude, Hz, phase
+ZONE = (1.0, 1.33)                                   # the global force acts for th in it
+
+
+def loaded_pendulum() -> cd.Mechanism:
+    rod = cd.Body("rod", M, JC, (RC, 0.0), {"O": (0.0, 0.0), "T": (L, 0.0)},
+                  guess=(0.0, 0.0, 0.3))
+    joint = cd.Joint("O", "revolute", "ground.O", "rod.O")
+    loads = [
+        cd.Load("motor", cd.Law("motor", stall=STALL, no_load_speed=W0), joint="O"),
+        cd.Load("tip_body", cd.Law("constant", value=FB), body="rod", point="T",
+                direction=(0.0, 1.0), frame="body"),
+        cd.Load("tip_global", cd.Law("constant", value=1.0), body="rod", point="T",
+                direction=FG, frame="global", zone=cd.Zone("O", *ZONE)),
+        cd.Load("moment", cd.Law("harmonic", mean=MOM[0], amplitude=MOM[1],
+                                 frequency=MOM[2], phase=MOM[3]), body="rod"),
+    ]
+    el = cd.Element("spring", "ground.S", "rod.T", K, REST, DAMP, PRE)
+    return cd.Mechanism("loaded pendulum", [rod], [joint], ground={"O": (0, 0), "S": S},
+                        initial=cd.Initial({"O": 0.3}, {"O": 0.0}), loads=loads,
+                        elements=[el])
+
+
+def pendulum_rhs(t, y, acting):
+    th, w = y
+    tip = np.array([L * math.cos(th), L * math.sin(th)])
+    dtip = np.array([-L * math.sin(th), L * math.cos(th)])
+    d = tip - np.array(S)
+    ln = math.hypot(*d)
+    dl = d @ dtip / ln
+    tension = PRE + K * (ln - REST) + DAMP * dl * w
+    tau = STALL * (1 - w / W0)                                   # motor
+    tau += L * FB                                                # body-frame force (y)
+    if acting:
+        g = np.array(FG) / math.hypot(*FG)
+        tau += tip[0] * g[1] - tip[1] * g[0]
+    tau += MOM[0] + MOM[1] * math.sin(2 * math.pi * MOM[2] * t + MOM[3])
+    tau += -tension * dl                                         # element
+    tau += -M * 9.81 * RC * math.cos(th)                         # gravity
+    return [w, tau / (JC + M * RC**2)]
+
+
+def minimal_solution(t_end: float, grid: np.ndarray):
+    """DOP853 with the zone edges as events, restarted at each switch."""
+    t0, y0 = 0.0, [0.3, 0.0]
+    acting = ZONE[0] <= y0[0] <= ZONE[1]
+    switches, ts, ys = [], [], []
+    while t0 < t_end:
+        edges = [lambda t, y, *_, e=e: y[0] - e for e in ZONE]  # solve_ivp passes args too
+        for f, e in zip(edges, ZONE, strict=True):
+            f.terminal = True
+            # only a crossing back from the side the state is on (or moving to) counts:
+            # a restart on an edge must not find that edge again at once
+            gap = y0[0] - e
+            f.direction = -1.0 if (gap > 1e-9 or (abs(gap) <= 1e-9 and y0[1] > 0)) else 1.0
+        sol = solve_ivp(pendulum_rhs, (t0, t_end), y0, method="DOP853", rtol=1e-12,
+                        atol=1e-14, args=(acting,), events=edges, dense_output=True)
+        seg = grid[(grid >= t0) & (grid <= sol.t[-1])]
+        if seg.size:
+            ts.append(seg)
+            ys.append(sol.sol(seg)[0])
+        if sol.status == 1:
+            t0, y0 = sol.t[-1], sol.y[:, -1]
+            switches.append(t0)
+            acting = not acting
+            t0 = np.nextafter(t0, np.inf)
+        else:
+            break
+    return np.concatenate(ts), np.concatenate(ys), switches
+
+
+@pytest.mark.parametrize("method", ["ida", "iterative"])
+def test_loaded_pendulum_against_minimal_coordinates(method):
+    mech = loaded_pendulum()
+    t_end = 3.0
+    if method == "ida":
+        res = cd.run_dae(mech, t_end, rtol=1e-11, atol=1e-13, output_dt=0.01)
+    else:
+        res = cd.run_iterative(mech, t_end, dt=1e-4, output_every=100)
+    grid = np.round(np.arange(0, 301) * 0.01, 12)
+    tm, thm, switches = minimal_solution(t_end, grid)
+    assert len(switches) >= 2  # the zone is entered and left
+    zone_events = [e for e in res.events if e.kind == "zone"]
+    assert [e.load for e in zone_events] == ["tip_global"] * len(switches)
+    th = res.resample(tm, res.joint("O").position)
+    if method == "ida":
+        assert np.max(np.abs(th - thm)) <= 1e-8
+        assert np.max(np.abs(np.array([e.t for e in zone_events]) - switches)) <= 1e-9
+        assert [e.side for e in zone_events][:2] == (
+            ["leave", "enter"] if ZONE[0] <= 0.3 <= ZONE[1] else ["enter", "leave"])
+        # the audit's integrals are Simpson sums over the samples: a 1 ms grid for it
+        fine = cd.run_dae(mech, t_end, rtol=1e-11, atol=1e-13, output_dt=0.001)
+        assert np.max(np.abs(fine.energy().residual)) <= 1e-8
+    else:  # first order in dt: 1e-4 s steps, switches at the end of the crossing step
+        assert np.max(np.abs(th - thm)) <= 5e-3
+        assert np.max(np.abs(np.array([e.t for e in zone_events]) - switches)) <= 5e-4
+    # load series: the motor line and the zone's on/off
+    mot = res.load("motor")
+    assert mot.value == pytest.approx(STALL * (1 - res.joint("O").velocity / W0), rel=1e-12)
+    acting = np.array(["tip_global" in res.configurations[i].zones for i in res.configuration])
+    assert acting.any() and not acting.all()
+    assert np.all(res.load("tip_global").value[~acting] == 0.0)
+    assert np.all(res.load("tip_global").value[acting] == 1.0)
+
+
+def test_bad_loads_and_elements(tmp_path):
+    text = (MODELS / "pendulum_stop.toml").read_text() + '''
+[loads.a]
+joint = "Q"
+law = "constant"
+value = 1.0
+
+[loads.b]
+body = "rod"
+point = "nose"
+direction = [1.0, 0.0]
+law = "constant"
+value = 1.0
+
+[loads.c]
+joint = "O"
+law = "motor"
+stall = 1.0
+no_load_speed = 0.0
+
+[loads.d]
+body = "rod"
+point = "tip"
+direction = [0.0, 0.0]
+law = "motor"
+stall = 1.0
+no_load_speed = 2.0
+
+[loads.e]
+joint = "O"
+law = "constant"
+value = 1.0
+zone = { lower = -2.0, upper = -1.0 }
+
+[loads.f]
+body = "wheel"
+law = "sinus"
+value = 1.0
+
+[elements.g]
+connects = ["ground.O", "rod.nose"]
+stiffness = -1.0
+'''
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(cd.ModelError) as info:
+        cd.load(path)
+    got = {(p.table, p.key) for p in info.value.problems}
+    assert {("loads.a", "joint"), ("loads.b", "point"), ("loads.c", "no_load_speed"),
+            ("loads.d", "direction"), ("loads.d", "law"), ("loads.e", "zone"),
+            ("loads.f", "law"), ("elements.g", "connects"), ("elements.g", "stiffness")} <= got
+    msg = str(info.value)
+    assert "[loads.e] zone: [-2.0, -1.0] lies outside the limits [-0.6, None]" in msg
+    assert "unknown joint 'Q'" in msg and "has no point 'nose'" in msg
+    assert "a motor law needs a joint rate" in msg
