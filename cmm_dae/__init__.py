@@ -25,6 +25,7 @@ from .mechanism import (
     Damper,
     Driver,
     Element,
+    Friction,
     Initial,
     Joint,
     Law,
@@ -44,7 +45,8 @@ from .sweep import SweepTable, sweep, with_params
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
     "Configuration", "Convergence", "convergence", "Damper", "Driver", "Element", "Event",
-    "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load", "Load",
+    "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",
+    "Load",
     "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",
     "run_iterative", "simulate", "SolverError", "Spring", "Stats", "Status", "Structure",
     "structure", "sweep", "SweepTable", "with_params", "work_precision", "WorkPrecision",

@@ -144,7 +144,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     ini = mech.initial
     # A joint given exactly on one of its limits is a candidate for a start on the stop.
     on_stop = {}
-    for name in model.locks:
+    for name in mech.limited_joints:
         if name in ini.joints:
             lim = mech.joints[name].limits
             val = ini.joints[name]
@@ -162,7 +162,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     hs.zones = initial_zones(model, q)
     c0 = model.joint_rates(q, v)[0]
     beyond = []
-    for name in model.locks:
+    for name in mech.limited_joints:
         lim = mech.joints[name].limits
         val = float(c0[model.jidx[name]])
         tol = 1e-12 * max(1.0, abs(val))
@@ -181,4 +181,26 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
             before = hs.current()
             hs.locked = trial
             events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
+    c0, cd0 = model.joint_rates(q, v)
+    for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
+        if name in hs.locked:
+            continue
+        k = model.jidx[name]
+        if cd0[k] != 0.0:
+            hs.slip = {**hs.slip, name: 1 if cd0[k] > 0 else -1}
+            continue
+        hs.stick_at[name] = float(c0[k])
+        trial = {**hs.locked, name: "stick"}
+        force = hs.lock_force(q, v, t0, name, trial)
+        before = hs.current()
+        if abs(force) <= hs.static(name):
+            hs.locked = trial
+            events.append(Event(t0, "stick", name, "stick", before, hs.current(), 0.0, 0.0,
+                                {}, 0.0, force))
+        else:
+            del hs.stick_at[name]
+            s = -1 if force > 0.0 else 1
+            hs.slip = {**hs.slip, name: s}
+            events.append(Event(t0, "slip", name, "positive" if s > 0 else "negative", before,
+                                hs.current(), 0.0, 0.0, {}, 0.0, force))
     return q, v, events

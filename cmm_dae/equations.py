@@ -213,7 +213,10 @@ class Model:
         self.body_names = list(mech.bodies)
         self.joint_names = list(mech.joints)
         self.driver_names = list(mech.drivers)
-        self.locks = mech.limited_joints
+        #: joints with a lock row: on a stop (limits) or sticking (friction)
+        self.locks = mech.lockable_joints
+        #: joints with dry friction, in the order of their slip directions in ``p``
+        self.frictional = mech.frictional_joints
         nb = len(self.body_names)
         self.nq = nq = 3 * nb
         self.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
@@ -229,7 +232,8 @@ class Model:
         #: loads that act in a zone only, in the order of their switches in ``p``
         self.zoned = [n for n, ld in mech.loads.items() if ld.zone is not None]
         nz = len(self.zoned)
-        p = ca.SX.sym("p", 2 * nl + nz)
+        nf = len(self.frictional)
+        p = ca.SX.sym("p", 2 * nl + nz + nf)
         #: length of a configuration's parameter vector (lock switches and values, zones)
         self.n_params = int(p.numel())
         self._sym = (q, v, t, p)
@@ -299,6 +303,12 @@ class Model:
             if not (isinstance(gen, float) and gen == 0.0):
                 Qf += c_q[k, :].T * gen
         cddot = c_q @ a + ca.jacobian(cdot, q) @ v
+        # Kinetic friction of a slipping joint: against its slip direction s = +-1 (0 while
+        # it sticks or stands on a stop); s is a configuration parameter, so the force is
+        # smooth within a configuration and its switches are events.
+        for f, name in enumerate(self.frictional):
+            k = jidx[name]
+            Qf -= c_q[k, :].T * (mech.joints[name].friction.kinetic * p[2 * nl + nz + f])
 
         # Applied loads: a law times a joint direction, a point force or a body moment.
         self.load_names = list(mech.loads)
@@ -451,9 +461,11 @@ class Model:
         return Constraints(phi, Phi_q, Phi_t), c, c_q
 
     # ------------------------------------------------------------------ helpers
-    def params(self, locked: dict[str, float] | None = None, zones=()) -> np.ndarray:
+    def params(self, locked: dict[str, float] | None = None, zones=(),
+               slip: dict[str, int] | None = None) -> np.ndarray:
         """Parameter vector for a configuration: ``locked`` maps joint -> lock value;
-        ``zones`` names the zoned loads acting."""
+        ``zones`` names the zoned loads acting; ``slip`` maps a slipping joint to its
+        direction (+1 or -1)."""
         nl = len(self.locks)
         p = np.zeros(self.n_params)
         for name, val in (locked or {}).items():
@@ -462,6 +474,8 @@ class Model:
             p[nl + k] = val
         for name in zones:
             p[2 * nl + self.zoned.index(name)] = 1.0
+        for name, s in (slip or {}).items():
+            p[2 * nl + len(self.zoned) + self.frictional.index(name)] = float(s)
         return p
 
     def rows_of(self, kind: str, name: str) -> list[int]:

@@ -86,6 +86,8 @@ class HybridState:
     labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
     locked: dict[str, str] = field(default_factory=dict)
     zones: frozenset[str] = frozenset()  # zoned loads acting now
+    slip: dict[str, int] = field(default_factory=dict)  # slipping joint -> direction
+    stick_at: dict[str, float] = field(default_factory=dict)  # stuck joint -> coordinate
     force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
     configurations: list[Configuration] = field(default_factory=list)
     params: list[np.ndarray] = field(default_factory=list)
@@ -95,32 +97,40 @@ class HybridState:
     _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
 
     def limit_value(self, joint: str, side: str) -> float:
+        if side == "stick":
+            return self.stick_at[joint]
         lim = self.model.mech.joints[joint].limits
         return lim.lower if side == "lower" else lim.upper
 
-    def params_of(self, locked: Locked, zones: frozenset[str] | None = None) -> np.ndarray:
-        """Parameter vector of any lock set (cached; a trial set is not registered), with
-        the zoned loads ``zones`` acting (default: those acting now)."""
+    def _mode(self, locked: Locked, zones, slip) -> tuple:
         zones = self.zones if zones is None else zones
-        key = (_key(locked), tuple(sorted(zones)))
+        slip = self.slip if slip is None else slip
+        return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
+                tuple(sorted(zones)), tuple(sorted(slip.items())))
+
+    def params_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                  slip: Mapping[str, int] | None = None) -> np.ndarray:
+        """Parameter vector of any lock set (cached; a trial set is not registered), with
+        the zoned loads ``zones`` acting and the joints ``slip`` slipping (default: as
+        now)."""
+        key = self._mode(locked, zones, slip)
         p = self._trial.get(key)
         if p is None:
             p = self._trial[key] = self.model.params(
-                {j: self.limit_value(j, s) for j, s in locked.items()}, zones)
+                {j: val for j, _, val in key[0]}, key[1], dict(key[2]))
         return p
 
-    def index_of(self, locked: Locked, zones: frozenset[str] | None = None) -> int:
-        """Index of the configuration of ``locked`` with ``zones`` acting (registered,
-        labelled, on first use)."""
-        zones = self.zones if zones is None else zones
-        key = (_key(locked), tuple(sorted(zones)))
+    def index_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                 slip: Mapping[str, int] | None = None) -> int:
+        """Index of the configuration (registered, labelled, on first use)."""
+        key = self._mode(locked, zones, slip)
         if key not in self._index:
-            locked = dict(key[0])
-            label, dof = self.labeller(locked) if self.labeller else ("", 0)
+            lk = {j: s for j, s, _ in key[0]}
+            label, dof = self.labeller(lk) if self.labeller else ("", 0)
             self._index[key] = len(self.configurations)
             self.configurations.append(Configuration(
-                tuple(locked), tuple(locked.values()), dof, label, key[1]))
-            self.params.append(self.params_of(locked, zones))
+                tuple(lk), tuple(lk.values()), dof, label, key[1], key[2]))
+            self.params.append(self.params_of(lk, key[1], dict(key[2])))
         return self._index[key]
 
     def current(self) -> int:
@@ -139,7 +149,12 @@ class HybridState:
         """
         side = (self.locked if locked is None else locked)[joint]
         k = self.model.n_fixed + self.model.locks.index(joint)
-        return -lam[k] if side == "lower" else lam[k]
+        return lam[k] if side == "upper" else -lam[k]  # "stick": the lock's force along +c
+
+    def static(self, joint: str) -> float:
+        """Static friction limit of a joint (0 without friction), N or N m."""
+        f = self.model.mech.joints[joint].friction
+        return f.static if f is not None else 0.0
 
     def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
                    locked: Locked | None = None) -> float:
@@ -157,13 +172,16 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
     out = [Trigger(name, "", "zone") for name in model.zoned]
     for name in model.locks:
         if name in locked:
-            out.append(Trigger(name, locked[name], "push"))
+            kind = "slip" if locked[name] == "stick" else "push"
+            out.append(Trigger(name, locked[name], kind))
             continue
         lim = model.mech.joints[name].limits
-        if lim.lower is not None:
+        if lim is not None and lim.lower is not None:
             out.append(Trigger(name, "lower", "gap"))
-        if lim.upper is not None:
+        if lim is not None and lim.upper is not None:
             out.append(Trigger(name, "upper", "gap"))
+        if model.mech.joints[name].friction is not None:
+            out.append(Trigger(name, "", "rate"))  # a slipping joint's rate
     return out
 
 
@@ -179,6 +197,10 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
     for i, tr in enumerate(triggers):
         if tr.kind == "zone":
             out[i] = _zone_margin(hs, tr.joint, c)
+        elif tr.kind == "rate":  # positive while it slips on in its direction
+            out[i] = hs.slip.get(tr.joint, 0) * cdot[jidx[tr.joint]]
+        elif tr.kind == "slip":  # positive while the stuck joint carries less than Fs
+            out[i] = hs.static(tr.joint) - abs(hs.push(lam, tr.joint))
         elif tr.kind == "gap":
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
@@ -186,8 +208,8 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
                 out[i] = 1.0 if cdot[k] > 0.0 else c[k] - L
             else:
                 out[i] = 1.0 if cdot[k] < 0.0 else L - c[k]
-        else:
-            out[i] = hs.push(lam, tr.joint)
+        else:  # friction holds a joint on its stop until the pull beats it
+            out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint)
 
 
 def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[Trigger]:
@@ -207,6 +229,10 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
                 out.append(tr)
             continue
         k = model.jidx[tr.joint]
+        if tr.kind == "rate":
+            if hs.slip.get(tr.joint, 0) * cd[k] < 0.0:
+                out.append(tr)
+            continue
         if tr.kind == "gap":
             L = hs.limit_value(tr.joint, tr.side)
             beyond = (L - c[k]) if tr.side == "lower" else (c[k] - L)
@@ -217,7 +243,9 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
         elif hs.stayed.get(tr.joint) != t:
             if lam is None:
                 lam = model.kkt(q, v, t, hs.p)[1]
-            if hs.push(lam, tr.joint) < 0.0:
+            f = hs.push(lam, tr.joint)
+            if (tr.kind == "slip" and abs(f) > hs.static(tr.joint)) or \
+                    (tr.kind == "push" and f + hs.static(tr.joint) < 0.0):
                 out.append(tr)
     return out
 
@@ -356,8 +384,10 @@ def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float
     or when it arrives at (almost) zero speed and the stop would not push (the joint is
     leaving); a push is rejected when the joint is no longer locked, a gap when it is
     locked already (an earlier event of the same instant changed it)."""
-    if tr.kind == "push":
+    if tr.kind in ("push", "slip"):
         return hs.locked.get(tr.joint) == tr.side
+    if tr.kind == "rate":
+        return tr.joint in hs.slip
     if tr.joint in hs.locked:
         return False
     cdv = _joint_rate(hs.model, q, v, tr.joint)
@@ -381,12 +411,69 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
         return []
     if tr.kind == "gap":
         return at_limit(hs, q, v, t, tr.joint, tr.side, policy)
+    if tr.kind == "rate":
+        return [rate_zero(hs, q, v, t, tr.joint)]
+    force = hs.lock_force(q, v, t, tr.joint)
+    if tr.kind == "slip":
+        return [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)]
     if would_reenter(hs, q, v, t, tr.joint, tr.side) and \
             t - hs.stayed.get(tr.joint, -math.inf) > ZENO_DT:
         hs.stayed[tr.joint] = t  # stays locked: no chattering
         return []
-    force = hs.lock_force(q, v, t, tr.joint)
-    return [Transition(release(hs, q, v, t, tr.joint, force), q, v)]
+    away = 1 if tr.side == "lower" else -1  # a frictional joint slides off its stop
+    return [Transition(release(hs, q, v, t, tr.joint, force, away), q, v)]
+
+
+def _direction(force: float) -> int:
+    """Slip direction of a joint freed from a lock that carried ``force`` (along +c):
+    it moves the way the applied loads push it, against the lock."""
+    return -1 if force > 0.0 else 1
+
+
+def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+              force: float) -> Event:
+    """A stuck joint whose force exceeds static friction starts to slip."""
+    before = hs.current()
+    s = _direction(force)
+    hs.locked = {j: x for j, x in hs.locked.items() if j != joint}
+    hs.stick_at.pop(joint, None)
+    hs.slip = {**hs.slip, joint: s}
+    return Event(t, "slip", joint, "positive" if s > 0 else "negative", before, hs.current(),
+                 0.0, 0.0, {}, 0.0, float(force))
+
+
+def rate_zero(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
+              ) -> Transition:
+    """A slipping joint's rate reached zero: it sticks if the force it must then carry is
+    within static friction, else it slips on the other way. The lock puts the rate
+    exactly to zero (a vanishing impulse at a located root; the fixed-step algorithm's
+    overshoot of one step otherwise)."""
+    model = hs.model
+    k = model.jidx[joint]
+    before = hs.current()
+    c, cd = model.joint_rates(q, v)
+    slip = {j: s for j, s in hs.slip.items() if j != joint}
+    hs.stick_at[joint] = float(c[k])
+    trial = {**hs.locked, joint: "stick"}
+    p = hs.params_of(trial, slip=slip)
+    row = model.n_fixed + model.locks.index(joint)
+    T_minus = 0.5 * np.sum(model.mass * v**2)
+    v0, imp = impact_map(model, q, v, t, p, row, 0.0)
+    _, lam, _ = model.kkt(q, v0, t, p)
+    force = hs.push(lam, joint, trial)
+    if abs(force) <= hs.static(joint):
+        hs.locked, hs.slip = trial, slip
+        impulses = {f"{r.kind} {r.name}": float(x) for r, x in
+                    zip(model.rows, imp, strict=True) if x != 0.0}
+        lost = float(T_minus - 0.5 * np.sum(model.mass * v0**2))
+        return Transition(Event(t, "stick", joint, "stick", before, hs.current(),
+                                float(cd[k]), 0.0, impulses, lost, float(force)), q, v0)
+    hs.stick_at.pop(joint, None)
+    s = _direction(force)
+    hs.slip = {**slip, joint: s}
+    return Transition(Event(t, "slip", joint, "positive" if s > 0 else "negative", before,
+                            hs.current(), float(cd[k]), float(cd[k]), {}, 0.0, float(force)),
+                      q, v)
 
 
 def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -468,9 +555,12 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
         cdp = 0.0
         hs.locked = target
+        hs.slip = {j: s for j, s in hs.slip.items() if j != joint}  # on the stop: no slip
         hs.bounces.pop(joint, None)
     else:
         hs.bounces.setdefault(joint, []).append(t)
+        if joint in hs.slip:  # it slides back the other way
+            hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
     impulses = {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
                 if x != 0.0}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
@@ -485,12 +575,16 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
 
 
 def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
-            force: float) -> Event:
-    """Unlock ``joint`` at time t; the event carries the lock force at release."""
+            force: float, away: int = 1) -> Event:
+    """Unlock ``joint`` at time t; the event carries the lock force at release. A joint
+    with friction leaves slipping in direction ``away``."""
     before = hs.current()
     locked = dict(hs.locked)
     side = locked.pop(joint)
     hs.locked = locked
+    hs.stick_at.pop(joint, None)
+    if hs.model.mech.joints[joint].friction is not None:
+        hs.slip = {**hs.slip, joint: away}
     cdv = _joint_rate(hs.model, q, v, joint)
     return Event(t, "release", joint, side, before, hs.current(), cdv, cdv, {}, 0.0,
                  float(force))

@@ -139,7 +139,7 @@ class IdaIntegrator(Integrator):
         self.p[:] = hs.p
         first_step, self.first_step = self.first_step, 0.0
         self.triggers = ev.event_list(model, hs.locked)
-        self.has_push = any(tr.kind == "push" for tr in self.triggers)
+        self.has_push = any(tr.kind in ("push", "slip") for tr in self.triggers)
         self.ev_out = np.zeros(len(self.triggers))
         self.n_steps = 0
         self.t_last = -math.inf

@@ -22,6 +22,7 @@ from .mechanism import (
     Damper,
     Driver,
     Element,
+    Friction,
     Initial,
     Joint,
     Law,
@@ -41,7 +42,8 @@ TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "loads", "elem
             "initial")
 MECH_KEYS = ("name", "gravity")
 BODY_KEYS = ("mass", "inertia", "inertia_about", "centroid", "points", "guess")
-JOINT_KEYS = ("type", "connects", "axis", "angle", "limits", "restitution", "spring", "damper")
+JOINT_KEYS = ("type", "connects", "axis", "angle", "limits", "restitution", "spring", "damper",
+              "friction")
 LAW_KEYS = {
     "constant": ("value",),
     "polynomial": ("coefficients",),
@@ -296,7 +298,13 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     if "damper" in d:
         dt = r.keys(f"{t}.damper", r.sub(t, d, "damper"), ("damping",))
         damper = Damper(r.num(f"{t}.damper", dt, "damping"))
-    return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper)
+    friction = None
+    if "friction" in d:
+        ft = r.keys(f"{t}.friction", r.sub(t, d, "friction"), ("static", "kinetic"))
+        friction = Friction(r.num(f"{t}.friction", ft, "static"),
+                            r.num(f"{t}.friction", ft, "kinetic"))
+    return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper,
+                 friction)
 
 
 def _connects(r: _Reader, t: str, d: dict) -> tuple[str, str]:

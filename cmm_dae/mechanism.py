@@ -101,6 +101,16 @@ class Damper:
 
 
 @dataclass(frozen=True)
+class Friction:
+    """Dry friction in a joint: it sticks while the force it must carry stays within
+    ``static`` and slides against ``kinetic`` (N for a prismatic joint, N m for a revolute
+    one; static >= kinetic >= 0)."""
+
+    static: float
+    kinetic: float
+
+
+@dataclass(frozen=True)
 class Joint:
     """A lower pair between two bodies (either may be ``ground``).
 
@@ -124,6 +134,8 @@ class Joint:
         Spring on the joint coordinate (a rest beyond a limit is a preload: force constraint).
     damper : Damper or None
         Damper on the joint coordinate rate.
+    friction : Friction or None
+        Dry friction (stick/slip, event-located; no regularisation).
     """
 
     name: str
@@ -136,6 +148,7 @@ class Joint:
     restitution: float = 0.0
     spring: Spring | None = None
     damper: Damper | None = None
+    friction: Friction | None = None
 
     @property
     def first_body(self) -> str:
@@ -364,6 +377,17 @@ class Mechanism:
         """Names of the joints with limits (the metamorphic joints), in file order."""
         return [n for n, j in self.joints.items() if j.limits is not None]
 
+    @property
+    def lockable_joints(self) -> list[str]:
+        """Joints that can lock: on a stop (limits) or sticking (friction), in file order."""
+        return [n for n, j in self.joints.items()
+                if j.limits is not None or j.friction is not None]
+
+    @property
+    def frictional_joints(self) -> list[str]:
+        """Joints with dry friction, in file order."""
+        return [n for n, j in self.joints.items() if j.friction is not None]
+
     def point(self, ref: str) -> Vec2:
         """Local coordinates (m) of ``"body.point"`` in its body frame."""
         body, pt = ref.split(".", 1)
@@ -447,6 +471,12 @@ def validate(m: Mechanism) -> list[Problem]:
         if j.damper is not None and not (_finite(j.damper.damping) and j.damper.damping >= 0):
             out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
                                f"got {j.damper.damping}"))
+        if j.friction is not None:
+            fs, fk = j.friction.static, j.friction.kinetic
+            if not (_finite(fs) and _finite(fk) and fs >= fk >= 0):
+                out.append(Problem(t, "friction", f"expected static >= kinetic >= 0 "
+                                   f"({'N' if j.type == 'prismatic' else 'N m'}), got "
+                                   f"static = {fs}, kinetic = {fk}"))
     for name in m.bodies:
         if name not in used_bodies:
             out.append(Problem(f"bodies.{name}", "", "is connected by no joint"))
@@ -458,6 +488,9 @@ def validate(m: Mechanism) -> list[Problem]:
         elif m.joints[name].limits is not None:
             out.append(Problem(t, "", f"joint '{name}' has limits: a driven joint cannot be "
                                "metamorphic"))
+        elif m.joints[name].friction is not None:
+            out.append(Problem(t, "", f"joint '{name}' has friction: the driver would carry "
+                               "it (put the friction on an undriven joint)"))
         out.extend(_check_driver(t, d))
     for name, ld in m.loads.items():
         out.extend(_check_load(m, f"loads.{name}", ld))

@@ -102,6 +102,21 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
             F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
             jforce[:, k] = -F
             jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
+    # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
+    # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
+    friction = np.zeros((n, nj))
+    nl, nz = len(model.locks), len(model.zoned)
+    for f, name in enumerate(model.frictional):
+        k = model.joint_names.index(name)
+        fk = mech.joints[name].friction.kinetic
+        s = P[:, 2 * nl + nz + f] if n else np.zeros(0)
+        row = model.n_fixed + model.locks.index(name)
+        lock = -lam[:, row] if n else np.zeros(0)  # the lock row's force along +c
+        sides = np.array([dict(zip(configurations[c].locked, configurations[c].sides,
+                                   strict=True)).get(name, "") for c in config])
+        stuck = sides == "stick"
+        pull = ((sides == "lower") & (lock < 0)) | ((sides == "upper") & (lock > 0))
+        friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
     effort = np.zeros((n, len(model.driver_names)))
     for k, name in enumerate(model.driver_names):
         effort[:, k] = -lam[:, model.rows_of("driver", name)[0]]
@@ -109,6 +124,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
             "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
             "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel,
+            "friction": friction,
             "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
             "load_value": extras[3], "load_power": extras[4],
             "event_sample": (np.asarray(event_sample, int) if event_sample is not None
@@ -127,10 +143,11 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         "springs": {n: [j.spring.stiffness, j.spring.rest] for n, j in mech.joints.items()
                     if j.spring is not None},
         "dampers": {n: j.damper.damping for n, j in mech.joints.items() if j.damper is not None},
-        "metamorphic": model.locks,
+        "metamorphic": mech.limited_joints,
         "elements": {n: [e.stiffness, e.rest, e.damping, e.preload]
                      for n, e in mech.elements.items()},
         "loads": model.load_names,
+        "frictional": model.frictional,
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},
         "ground": {k: list(v) for k, v in mech.ground.items()},

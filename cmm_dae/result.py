@@ -33,6 +33,8 @@ class Configuration:
         The paper's name: non-collision, internal/external collision (joint ...).
     zones : tuple[str, ...]
         The loads with a zone that act in this configuration.
+    slip : tuple[tuple[str, int], ...]
+        Joints slipping against kinetic friction, with their direction (+1 or -1).
     """
 
     locked: tuple[str, ...]
@@ -40,6 +42,7 @@ class Configuration:
     dof: int
     label: str
     zones: tuple[str, ...] = ()
+    slip: tuple[tuple[str, int], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,8 @@ class Event:
     kind : str
         ``"limit"`` (reached a limit and locked), ``"bounce"`` (reached it and rebounded),
         ``"lock"`` (locked without impact), ``"release"``, ``"zone"`` (a load's zone
-        entered or left).
+        entered or left), ``"stick"`` and ``"slip"`` (dry friction; ``side`` "stick",
+        "positive" or "negative", the force at the switch in ``release_force``).
     joint : str
         The metamorphic joint (for a zone: the joint whose coordinate defines it).
     side : str
@@ -110,7 +114,9 @@ class JointSeries:
     position (n,) rad or m; velocity (n,); acceleration (n,); force (n, 2) N, of the first
     body on the second, global axes; torque (n,) N m, moment of the first body on the second
     about the second body's connect point (CCW +), lock torque/force included, drivers,
-    springs and dampers excluded.
+    springs and dampers excluded; friction (n,) N m or N along +coordinate on the second
+    body: kinetic friction while slipping, the force carried while stuck (zero for a joint
+    without friction).
     """
 
     position: np.ndarray
@@ -118,6 +124,7 @@ class JointSeries:
     acceleration: np.ndarray
     force: np.ndarray
     torque: np.ndarray
+    friction: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -169,6 +176,7 @@ class Energy:
     residual: np.ndarray
     element: np.ndarray
     load_work: np.ndarray
+    friction_loss: np.ndarray
 
 
 def _cumulative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -255,10 +263,11 @@ class Result:
         return mask
 
     def watched_joints(self) -> list[str]:
-        """The joints worth watching: metamorphic joints (limits: geometric constraints)
-        and sprung joints (force constraints, like the double-folded mechanism's D); all
-        joints when there are neither."""
+        """The joints worth watching: metamorphic joints (limits: geometric constraints),
+        joints with friction and sprung joints (force constraints, like the double-folded
+        mechanism's D); all joints when there are none of these."""
         out = list(self.meta.get("metamorphic", []))
+        out += [j for j in self.meta.get("frictional", []) if j not in out]
         out += [j for j in self.meta.get("springs", {}) if j not in out]
         return out or list(self.meta["joints"])
 
@@ -276,8 +285,9 @@ class Result:
         """Time series of joint ``name``."""
         k = self._index("joints", name)
         d = self.data
+        fr = d["friction"][:, k] if "friction" in d else np.zeros(self.t.size)
         return JointSeries(d["c"][:, k], d["cd"][:, k], d["cdd"][:, k], d["jforce"][:, k, :],
-                           d["jtorque"][:, k])
+                           d["jtorque"][:, k], fr)
 
     def element(self, name: str) -> ElementSeries:
         """Time series of force element ``name``."""
@@ -353,6 +363,9 @@ class Result:
         lw = _cumulative(self.t, np.sum(d["load_power"], axis=1)) if "load_power" in d \
             else np.zeros(self.t.size)
         diss = _cumulative(self.t, P_diss)
+        P_fr = -np.sum(d["friction"] * d["cd"], axis=1) if "friction" in d \
+            else np.zeros(self.t.size)
+        fr_loss = _cumulative(self.t, P_fr)
         lost = np.zeros(self.t.size)
         after = d.get("event_sample", np.zeros(0, int))
         seen: dict[float, int] = {}
@@ -365,8 +378,8 @@ class Result:
                 i = int(np.searchsorted(self.t, e.t, side="left")) + k + 1
             lost[min(i, self.t.size):] += e.energy_lost
         E = T + Vg + Vs + Ve
-        resid = work + lw - (E - E[0]) - diss - lost
-        return Energy(self.t, T, Vg, Vs, work, diss, lost, resid, Ve, lw)
+        resid = work + lw - (E - E[0]) - diss - lost - fr_loss
+        return Energy(self.t, T, Vg, Vs, work, diss, lost, resid, Ve, lw, fr_loss)
 
     # ------------------------------------------------------------------ tables
     def event_table(self) -> str:
@@ -461,7 +474,8 @@ def load_result(path: str | Path) -> Result:
             meta = json.loads(str(z["__meta__"]))
             data = {k: np.asarray(z[k]) for k in z.files if k != "__meta__"}
         configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), int(c["dof"]),
-                                 str(c["label"]), tuple(c.get("zones", ())))
+                                 str(c["label"]), tuple(c.get("zones", ())),
+                                 tuple((j, int(s)) for j, s in c.get("slip", ())))
                    for c in meta.pop("configurations")]
         events = [Event(**e) for e in meta.pop("events")]
         stats = Stats(**meta.pop("stats"))

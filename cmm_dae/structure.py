@@ -354,6 +354,9 @@ def configuration_label(st: Structure | None, locked: dict[str, str],
     for j in sorted(locked):
         if force.get(j) == locked[j]:
             continue  # held by its preloaded spring: a force constraint, not a collision
+        if locked[j] == "stick":
+            parts.append(f"stuck (joint {j})")  # held by friction, not by a stop
+            continue
         g = st.group_of(j) if st is not None else None
         if g is None:
             parts.append(f"collision (joint {j})")
@@ -374,7 +377,7 @@ def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET
     cache: list[Structure] = []
 
     def label(locked: dict[str, str]) -> tuple[str, int]:
-        if not cache and any(force.get(j) != s for j, s in locked.items()):
+        if not cache and any(force.get(j) != s and s != "stick" for j, s in locked.items()):
             cache.append(structure(mech, budget=budget))
         return configuration_label(cache[0] if cache else None, locked, force), \
             mobility - len(locked)
