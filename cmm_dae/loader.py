@@ -214,7 +214,17 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     loads = [_load(r, k, v) for k, v in r.sub("", data, "loads").items()]
     elements = [_element(r, k, v) for k, v in r.sub("", data, "elements").items()]
 
-    ini = r.keys("initial", r.sub("", data, "initial"), ("joints", "velocities"))
+    ini = r.keys("initial", r.sub("", data, "initial"), ("joints", "velocities", "equilibrium"))
+    eq: tuple[str, ...] | str = ()
+    if "equilibrium" in ini:
+        raw = ini["equilibrium"]
+        if isinstance(raw, str):
+            eq = raw
+        elif isinstance(raw, list) and all(isinstance(x, str) for x in raw):
+            eq = tuple(raw)
+        else:
+            r.bad("initial", "equilibrium", f"expected \"position\" or a list of parameter "
+                  f"paths, got {_short(raw)}")
     ij = {k: r._num("initial", f"joints.{k}", v)
           for k, v in r.sub("initial", ini, "joints").items()}
     iv = {k: r._num("initial", f"velocities.{k}", v)
@@ -225,7 +235,7 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
         # Bad values were replaced by NaN above, so validation would repeat them: build
         # without validating, then report only what the reader did not already say.
         m = Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
-                      initial=Initial(ij, iv), gravity=gravity, source=source, loads=loads,
+                      initial=Initial(ij, iv, eq), gravity=gravity, source=source, loads=loads,
                       elements=elements, check=False)
         seen = {(p.table, p.key.split("[")[0]) for p in problems}
         problems += [p for p in validate(m) if (p.table, p.key) not in seen

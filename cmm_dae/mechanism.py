@@ -293,17 +293,25 @@ class Element:
 
 @dataclass(frozen=True)
 class Initial:
-    """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s)."""
+    """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s).
+
+    ``equilibrium``: dotted model paths (``"joints.D.spring.rest"``) solved so that the
+    coordinates named in ``joints`` start with zero acceleration (as many paths as those
+    coordinates), or ``"position"`` to solve those coordinates themselves; () for none.
+    """
 
     joints: MappingProxyType = field(default_factory=lambda: _frozen({}))
     velocities: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    equilibrium: tuple[str, ...] | str = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joints", _frozen(self.joints))
         object.__setattr__(self, "velocities", _frozen(self.velocities))
+        if not isinstance(self.equilibrium, str):
+            object.__setattr__(self, "equilibrium", tuple(self.equilibrium))
 
     def __reduce__(self):
-        return (Initial, (dict(self.joints), dict(self.velocities)))
+        return (Initial, (dict(self.joints), dict(self.velocities), self.equilibrium))
 
 
 @dataclass(frozen=True)
@@ -617,7 +625,29 @@ def _check_table(t: str, times: tuple, values: tuple) -> list[Problem]:
     return []
 
 
+def _check_equilibrium(m: Mechanism, out: list[Problem]) -> None:
+    eq = m.initial.equilibrium
+    if not eq:
+        return
+    known = [k for k in m.initial.joints if k not in m.drivers]
+    if isinstance(eq, str):
+        if eq != "position":
+            out.append(Problem("initial", "equilibrium", f"expected \"position\" or a list "
+                               f"of parameter paths, got {eq!r}"))
+        elif not known:
+            out.append(Problem("initial", "equilibrium", "\"position\" solves the "
+                               "coordinates named in [initial] joints: it names none"))
+        return
+    if len(eq) != len(known):
+        out.append(Problem("initial", "equilibrium", f"{len(eq)} parameter(s) for "
+                           f"{len(known)} free coordinate(s) ({', '.join(known) or 'none'}): "
+                           "give one parameter per coordinate named in [initial] joints"))
+    if len(set(eq)) != len(eq):
+        out.append(Problem("initial", "equilibrium", "a parameter is listed twice"))
+
+
 def _check_initial(m: Mechanism, out: list[Problem]) -> None:
+    _check_equilibrium(m, out)
     for key, table in (("joints", m.initial.joints), ("velocities", m.initial.velocities)):
         for jn, val in table.items():
             if jn not in m.joints:

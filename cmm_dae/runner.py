@@ -20,6 +20,7 @@ import numpy as np
 from . import events as ev
 from .assembly import start_state
 from .equations import Model
+from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
 from .integrator import Integrator, Recorder, RunOptions
@@ -176,6 +177,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
 def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
          model: Model | None) -> Result:
     wall0 = time.perf_counter()
+    mech, eq_values = solve_equilibrium(mech)
+    if any(not p.startswith("initial.") for p in eq_values):
+        model = None  # the solved parameters are compiled into the model: build it anew
     try:
         model = model if model is not None else Model(mech)
         build = time.perf_counter() - wall0
@@ -222,6 +226,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                    f"{type(e).__name__}: {e}")
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
                        stats, status, message, np.array(after, int))
+    res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if err is not None and throw:
         raise SolverError(message, status=status, result=res,

@@ -65,6 +65,43 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
     return None
 
 
+def path_problem(mech: Mechanism, path: str) -> Problem | None:
+    """Why a dotted path is not a parameter that can be set (None when it is)."""
+    parts = path.split(".")
+    tables = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}
+    if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
+            and ".".join(parts[2:]) in _FIELDS[parts[0]]:
+        why = _no_effect(mech, parts)
+        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+    if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
+            and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
+                                             and parts[1] in ("x", "y")):
+        return None
+    return Problem("sweep", path, "not a parameter of the mechanism; e.g. "
+                   "joints.D.spring.stiffness, bodies.slider.mass, joints.E.limits.upper, "
+                   "drivers.A.speed")
+
+
+def param_value(mech: Mechanism, path: str) -> float:
+    """The current value of a dotted model path (see :func:`with_params`); a spring,
+    damper or limit that does not exist reads as 0 (stiffness, damping) or NaN."""
+    parts = path.split(".")
+    bad = path_problem(mech, path)
+    if bad is not None:
+        raise ModelError(bad, mech.source)
+    if parts[0] == "gravity":
+        return mech.gravity["xy".index(parts[1])]
+    if parts[0] == "initial":
+        table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
+        return float(table.get(parts[2], math.nan))
+    obj = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}[parts[0]]
+    obj = obj[parts[1]]
+    for name in parts[2:]:
+        obj = getattr(obj, name) if obj is not None else None
+    return float(obj) if obj is not None else (0.0 if parts[-1] in ("stiffness", "damping")
+                                                 else math.nan)
+
+
 def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     """A copy of ``mech`` with dotted-path values replaced, validated again.
 
@@ -92,12 +129,10 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
             continue
         value = float(value)
         tables = {"bodies": bodies, "joints": joints, "drivers": drivers}
-        if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
-                and ".".join(parts[2:]) in _FIELDS[parts[0]]:
-            why = _no_effect(mech, parts)
-            if why is not None:
-                problems.append(Problem("sweep", path, f"has no effect: {why}"))
-                continue
+        bad = path_problem(mech, str(path))
+        if bad is not None:
+            problems.append(bad)
+        elif parts[0] in tables:
             table = tables[parts[0]]
             obj = table[parts[1]]
             if len(parts) == 3:
@@ -109,22 +144,17 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
                                             else {"damping": 0.0}
                                             if parts[2] == "damper" else {}))
                 table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]: value})})
-        elif parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities") \
-                and parts[2] in mech.joints:
+        elif parts[0] == "initial":
             (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
-        elif parts[0] == "gravity" and len(parts) == 2 and parts[1] in ("x", "y"):
-            gravity["xy".index(parts[1])] = value
         else:
-            problems.append(Problem("sweep", path, "not a parameter of the mechanism; e.g. "
-                                    "joints.D.spring.stiffness, bodies.slider.mass, "
-                                    "joints.E.limits.upper, drivers.A.speed"))
+            gravity["xy".index(parts[1])] = value
     if problems:
         raise ModelError(problems, mech.source)
     from .mechanism import Initial
 
-    return Mechanism(name=mech.name, bodies=bodies, joints=joints, ground=dict(mech.ground),
-                     drivers=drivers, initial=Initial(ini_j, ini_v), gravity=tuple(gravity),
-                     source=mech.source)
+    return mech.replace(bodies=bodies, joints=joints, drivers=drivers,
+                        initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
+                        gravity=tuple(gravity))
 
 
 def cases_from(params: Mapping[str, Iterable[float]] | list[Mapping[str, float]]
