@@ -196,7 +196,7 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
     jidx = hs.model.jidx
     for i, tr in enumerate(triggers):
         if tr.kind == "zone":
-            out[i] = _zone_margin(hs, tr.joint, c)
+            out[i] = _zone_margin(hs, tr.joint, c, cdot)
         elif tr.kind == "rate":  # positive while it slips on in its direction
             out[i] = hs.slip.get(tr.joint, 0) * cdot[jidx[tr.joint]]
         elif tr.kind == "slip":  # positive while the stuck joint carries less than Fs
@@ -225,7 +225,7 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
     out = []
     for tr in triggers:
         if tr.kind == "zone":
-            if _zone_margin(hs, tr.joint, c) < 0.0:
+            if _zone_margin(hs, tr.joint, c, cd) < 0.0:
                 out.append(tr)
             continue
         k = model.jidx[tr.joint]
@@ -250,12 +250,27 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
     return out
 
 
-def _zone_margin(hs: HybridState, load: str, c: np.ndarray) -> float:
-    """Distance of a zone's joint coordinate to the nearer zone edge, positive while the
-    load's acting state matches where the coordinate is (acting inside, idle outside)."""
+def _zone_margin(hs: HybridState, load: str, c: np.ndarray, cdot: np.ndarray) -> float:
+    """Distance of a zone's joint coordinate to the edge it moves toward, positive while
+    the load's acting state matches where the coordinate is (acting inside, idle
+    outside). As with the stops, an edge is armed only while the coordinate approaches
+    it (+1 otherwise): a coordinate at rest on an edge (a jaw closed on its stop at the
+    end of a cut) must not read as a root at every restart."""
     k, lo, up = hs.model.zone_info[load]
-    inside = min(c[k] - lo, up - c[k])
-    return inside if load in hs.zones else -inside
+    x, xd = c[k], cdot[k]
+    tol = _edge_tol(x)  # on an edge to round-off counts as on it (see zone_switch)
+    if load in hs.zones:  # acting: it leaves through the edge ahead
+        return (x - lo) if xd < 0.0 else (up - x) if xd > 0.0 else 1.0
+    if x <= lo + tol:  # idle below the zone: it enters moving up
+        return (lo - x) if xd > 0.0 else 1.0
+    if x >= up - tol:
+        return (x - up) if xd < 0.0 else 1.0
+    return -min(x - lo, up - x)  # idle inside: a mismatch (after a finite step)
+
+
+def _edge_tol(x: float) -> float:
+    """How close to a zone edge (rad or m) a coordinate counts as on it."""
+    return 1e-9 * (1.0 + abs(x))
 
 
 def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: float
@@ -266,7 +281,7 @@ def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: flo
     model = hs.model
     k, lo, up = model.zone_info[load]
     c, cd = model.joint_rates(q, v)
-    tol = 1e-9 * (1.0 + abs(c[k]))
+    tol = _edge_tol(c[k])
     if abs(c[k] - lo) <= tol:
         inside = cd[k] > 0.0
     elif abs(c[k] - up) <= tol:

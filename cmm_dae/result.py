@@ -246,11 +246,17 @@ class Result:
 
     # ------------------------------------------------------------ result-level helpers
     def resample(self, t_grid: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """A series ``y`` of this Result linearly interpolated onto ``t_grid`` (s); at
-        repeated (event) times the later, post-event sample wins."""
+        """A series ``y`` of this Result linearly interpolated onto ``t_grid`` (s). At an
+        event time (samples before and after it) the post-event sample holds from that
+        time on, and times just before it interpolate toward the pre-event one."""
         t = self.t
-        keep = np.append(t[1:] != t[:-1], True)
-        return np.interp(t_grid, t[keep], np.asarray(y)[keep])
+        y = np.asarray(y)
+        first = np.insert(t[1:] != t[:-1], 0, True)  # first sample of each time
+        last = np.append(t[1:] != t[:-1], True)  # last sample of each time
+        pre = first & ~last  # the pre-event sample of a repeated time
+        tt = np.where(pre, np.nextafter(t, -np.inf), t)
+        keep = last | pre
+        return np.interp(t_grid, tt[keep], y[keep])
 
     def away_from_events(self, t_grid: np.ndarray, margin: float,
                          *others: Result) -> np.ndarray:

@@ -86,6 +86,16 @@ def test_stick_slip_block_against_closed_form(method):
     assert np.allclose(fr[stuck], -AMP * np.sin(W * res.t[stuck]), atol=1e-9)
 
 
+def test_shipped_stick_slip_model_is_this_block():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "models" / "stick_slip_block.toml"
+    res = cd.run_dae(cd.load(path), 4.0, rtol=1e-11, atol=1e-13)
+    ref = closed_form(4.0)
+    assert [e.kind for e in res.events] == [k for k, _ in ref]
+    assert max(abs(e.t - t) for e, (_, t) in zip(res.events, ref, strict=True)) <= 1e-9
+
+
 def test_friction_input_errors(tmp_path):
     with pytest.raises(cd.ModelError, match=r"\[joints\.X\] friction: expected static >= "
                        r"kinetic >= 0 \(N\), got static = 0\.5, kinetic = 0\.6"):

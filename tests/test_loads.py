@@ -206,3 +206,50 @@ stiffness = -1.0
     assert "[loads.e] zone: [-2.0, -1.0] lies outside the limits [-0.6, None]" in msg
     assert "unknown joint 'Q'" in msg and "has no point 'nose'" in msg
     assert "a motor law needs a joint rate" in msg
+
+
+def test_nipper_cutting_load_by_virtual_work():
+    """While the jaw cuts, G is held on its collar and the mechanism moves with its driver:
+    by virtual work the cut's torque tau on joint C changes the driving torque by
+    -tau C' / omega, and nothing else changes."""
+    plain = cd.run_dae(cd.load(MODELS / "nipper_swing.toml"), 6.0, rtol=1e-10, atol=1e-12)
+    mech = cd.load(MODELS / "nipper_cutting.toml")
+    cut = cd.run_dae(mech, 6.0, rtol=1e-10, atol=1e-12)
+    enter, leave = [e for e in cut.events if e.kind == "zone"][:2]
+    assert (enter.side, leave.side) == ("enter", "leave")
+    assert leave.t == [e.t for e in cut.events if e.kind == "limit"][0]  # cut till closed
+    omega = mech.drivers["O"].speed
+    tau = mech.loads["cut"].law.value
+    t = np.linspace(enter.t + 1e-3, leave.t - 1e-3, 200)
+    d_eff = cut.resample(t, cut.driver("O").effort) - plain.resample(t, plain.driver("O").effort)
+    c_rate = plain.resample(t, plain.joint("C").velocity)
+    assert np.max(np.abs(d_eff - (-tau * c_rate / omega))) <= 1e-8
+    before = np.linspace(0.1, enter.t - 1e-3, 100)
+    assert np.max(np.abs(cut.resample(before, cut.driver("O").effort)
+                         - plain.resample(before, plain.driver("O").effort))) <= 1e-8
+    assert np.max(np.abs(cut.energy().residual)) <= 1e-6
+
+
+def test_motor_driven_crank_reaches_its_stop():
+    """A motor's torque-speed line lifts a crank onto a stop: the impact time against a
+    DOP853 minimal-coordinate model, then the stop holds the stalled motor against the
+    weight."""
+    mech = cd.load(MODELS / "motor_crank_stop.toml")
+    res = cd.run_dae(mech, 1.5, rtol=1e-11, atol=1e-13)
+    m, r, jc, stall, w0 = 0.3, 0.1, 1.0e-3, 0.6, 8.0
+
+    def rhs(t, y):
+        return [y[1], (stall * (1 - y[1] / w0) - m * 9.81 * r * math.cos(y[0]))
+                / (jc + m * r**2)]
+
+    hit = lambda t, y: y[0] - 1.2  # noqa: E731
+    hit.terminal = True
+    sol = solve_ivp(rhs, (0, 1.5), [-math.pi / 2, 0.0], method="DOP853", rtol=1e-12,
+                    atol=1e-14, events=hit)
+    assert [e.kind for e in res.events] == ["limit"]
+    assert abs(res.events[0].t - sol.t_events[0][0]) <= 1e-9
+    assert res.events[0].velocity_before == pytest.approx(sol.y_events[0][0][1], rel=1e-8)
+    held = res.t > res.events[0].t
+    # the ground pushes the crank back with the stalled motor's torque less the weight's
+    expect = -(stall - m * 9.81 * r * math.cos(1.2))
+    assert np.max(np.abs(res.joint("O").torque[held] - expect)) <= 1e-9
