@@ -138,7 +138,7 @@ def timeline(results: list[Result], path: Path) -> Path:
     for r in results:  # only configurations a run was in: the legend lists nothing else
         for i in r.entered_configurations():
             c = r.configurations[i]
-            txt = c.label + (f" [{','.join(c.locked)}]" if c.locked else "")
+            txt = c.describe()
             if txt not in labels:
                 labels.append(txt)
     colors = plt.cm.tab10(np.arange(len(labels)) % 10)
@@ -149,7 +149,7 @@ def timeline(results: list[Result], path: Path) -> Path:
         for i in range(1, r.t.size + 1):
             if i == r.t.size or cfg[i] != cfg[start]:
                 c = r.configurations[cfg[start]]
-                txt = c.label + (f" [{','.join(c.locked)}]" if c.locked else "")
+                txt = c.describe()
                 ax.barh(row, r.t[min(i, r.t.size - 1)] - r.t[start], left=r.t[start],
                         color=colors[labels.index(txt)], height=0.6)
                 start = i

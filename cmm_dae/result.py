@@ -44,6 +44,16 @@ class Configuration:
     zones: tuple[str, ...] = ()
     slip: tuple[tuple[str, int], ...] = ()
 
+    def describe(self) -> str:
+        """The label with the locked joints, the slipping joints (+/- direction) and the
+        zoned loads acting, e.g. ``non-collision [E] slip X+ load cut``."""
+        txt = self.label + (f" [{','.join(self.locked)}]" if self.locked else "")
+        if self.slip:
+            txt += " slip " + ",".join(f"{j}{'+' if s > 0 else '-'}" for j, s in self.slip)
+        if self.zones:
+            txt += " load " + ",".join(self.zones)
+        return txt
+
 
 @dataclass(frozen=True)
 class Event:
@@ -405,8 +415,7 @@ class Result:
         return "\n".join(lines)
 
     def _config_text(self, i: int) -> str:
-        c = self.configurations[i]
-        return f"{c.label} [{','.join(c.locked)}]" if c.locked else c.label
+        return self.configurations[i].describe()
 
     # ------------------------------------------------------------------ export
     def columns(self) -> dict[str, np.ndarray]:
