@@ -127,6 +127,17 @@ class _Reader:
             return ""
         return v
 
+    def choice(self, table: str, d: dict, key: str, options: tuple[str, ...]) -> str | None:
+        """A string that must be one of ``options`` (None, with the problem noted, else)."""
+        v = self.string(table, d, key)
+        if v in options:
+            return v
+        if v:
+            close = difflib.get_close_matches(v, options, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            self.bad(table, key, f"expected one of {', '.join(options)}, got {v!r}{hint}")
+        return None
+
     def sub(self, table: str, d: dict, key: str) -> dict:
         v = d.get(key, {})
         if not isinstance(v, dict):
@@ -278,14 +289,7 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     jtype = r.string(t, d, "type")
     if jtype and jtype not in ("revolute", "prismatic"):
         r.bad(t, "type", f"expected 'revolute' or 'prismatic', got {jtype!r}")
-    conn = d.get("connects")
-    first = second = "?.?"
-    if conn is None:
-        r.bad(t, "connects", "missing (expected [\"body.point\", \"body.point\"])")
-    elif not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str) for c in conn)):
-        r.bad(t, "connects", f"expected two strings \"body.point\", got {_short(conn)}")
-    else:
-        first, second = conn
+    first, second = _connects(r, t, d)
     if jtype == "revolute":
         for k in ("axis", "angle"):
             if k in d:
@@ -330,12 +334,8 @@ def _connects(r: _Reader, t: str, d: dict) -> tuple[str, str]:
 
 
 def _law(r: _Reader, t: str, d: dict) -> Law:
-    kind = r.string(t, d, "law")
-    if kind not in LAWS:
-        if kind:
-            close = difflib.get_close_matches(kind, LAWS, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            r.bad(t, "law", f"expected one of {', '.join(LAWS)}, got {kind!r}{hint}")
+    kind = r.choice(t, d, "law", LAWS)
+    if kind is None:
         return Law("constant")
     r.keys(t, d, LOAD_KEYS + LAW_KEYS[kind])
     if kind == "constant":
@@ -380,12 +380,8 @@ def _driver(r: _Reader, name: str, d: Any) -> Driver:
     if not isinstance(d, dict):
         r.bad(t, "", f"expected a table, got {_short(d)}")
         return Driver(name)
-    motion = r.string(t, d, "motion")
-    if motion not in MOTIONS:
-        if motion:
-            close = difflib.get_close_matches(motion, MOTIONS, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            r.bad(t, "motion", f"expected one of {', '.join(MOTIONS)}, got {motion!r}{hint}")
+    motion = r.choice(t, d, "motion", MOTIONS)
+    if motion is None:
         return Driver(name, "constant_speed")
     r.keys(t, d, DRIVER_KEYS[motion])
     if motion == "constant_speed":

@@ -100,6 +100,21 @@ class Damper:
     damping: float
 
 
+class _TwoPoints:
+    """Bodies of a ``first``/``second`` pair of "body.point" references."""
+
+    first: str
+    second: str
+
+    @property
+    def first_body(self) -> str:
+        return self.first.split(".", 1)[0]
+
+    @property
+    def second_body(self) -> str:
+        return self.second.split(".", 1)[0]
+
+
 @dataclass(frozen=True)
 class Friction:
     """Dry friction in a joint: it sticks while the force it must carry stays within
@@ -111,7 +126,7 @@ class Friction:
 
 
 @dataclass(frozen=True)
-class Joint:
+class Joint(_TwoPoints):
     """A lower pair between two bodies (either may be ``ground``).
 
     Parameters
@@ -149,14 +164,6 @@ class Joint:
     spring: Spring | None = None
     damper: Damper | None = None
     friction: Friction | None = None
-
-    @property
-    def first_body(self) -> str:
-        return self.first.split(".", 1)[0]
-
-    @property
-    def second_body(self) -> str:
-        return self.second.split(".", 1)[0]
 
     @property
     def unit(self) -> str:
@@ -266,7 +273,7 @@ class Load:
 
 
 @dataclass(frozen=True)
-class Element:
+class Element(_TwoPoints):
     """Spring-damper-actuator between two points of any two bodies (ground included).
 
     Tension ``preload + stiffness (L - rest) + damping L'`` (N) with L the distance of the
@@ -281,14 +288,6 @@ class Element:
     rest: float = 0.0
     damping: float = 0.0
     preload: float = 0.0
-
-    @property
-    def first_body(self) -> str:
-        return self.first.split(".", 1)[0]
-
-    @property
-    def second_body(self) -> str:
-        return self.second.split(".", 1)[0]
 
 
 @dataclass(frozen=True)
