@@ -233,8 +233,17 @@ class Model:
         self.zoned = [n for n, ld in mech.loads.items() if ld.zone is not None]
         nz = len(self.zoned)
         nf = len(self.frictional)
-        p = ca.SX.sym("p", 2 * nl + nz + nf)
-        #: length of a configuration's parameter vector (lock switches and values, zones)
+        #: loads whose law is a Python callable f(t, coordinate, rate): (load, joint index).
+        #: Their values enter as the last parameters, refilled from the state before every
+        #: evaluation (:meth:`fill`); the solver's Jacobian gets their chain-rule term from
+        #: :meth:`input_jacobian`.
+        self.callables = [(n, list(mech.joints).index(ld.joint))
+                          for n, ld in mech.loads.items() if ld.law.func is not None]
+        nu = len(self.callables)
+        p = ca.SX.sym("p", 2 * nl + nz + nf + nu)
+        self._u0 = 2 * nl + nz + nf
+        #: length of a configuration's parameter vector (lock switches and values, zones,
+        #: slip directions, callable load values)
         self.n_params = int(p.numel())
         self._sym = (q, v, t, p)
 
@@ -316,7 +325,10 @@ class Model:
         load_val, load_pow = [], []
         for name, ld in mech.loads.items():
             k = jidx[ld.joint] if ld.joint is not None else None
-            val = law_expr(ld.law, t, cdot[k] if k is not None else None)
+            if ld.law.func is not None:
+                val = p[self._u0 + [n for n, _ in self.callables].index(name)]
+            else:
+                val = law_expr(ld.law, t, cdot[k] if k is not None else None)
             if ld.zone is not None:
                 zj = jidx[ld.zone.joint if ld.zone.joint is not None else ld.joint]
                 self.zone_info[name] = (zj, -math.inf if ld.zone.lower is None
@@ -370,6 +382,8 @@ class Model:
         dn = ca.densify
         self.phi_fn = ca.Function("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)])
         self.coord_fn = ca.Function("coord", [q, v], [dn(c), dn(cdot), dn(c_q)])
+        self._rates_jac = Buffered(ca.Function("rates_jac", [q, v], [dn(c), dn(cdot), dn(c_q),
+                                                                     dn(ca.jacobian(cdot, q))]))
         self.kin_fn = ca.Function("kin", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t), dn(c),
                                                      dn(c_q)])
         self.kkt_fn = ca.Function("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)])
@@ -429,7 +443,7 @@ class Model:
 
     def active_rows(self, p: np.ndarray) -> np.ndarray:
         """Indices of the constraint rows in force in configuration ``p`` (cached)."""
-        key = p.tobytes()
+        key = p[:self._u0].tobytes()
         rows = self._active.get(key)
         if rows is None:
             rows = self._active[key] = np.flatnonzero(self.free_rows(p) == 0.0)
@@ -491,19 +505,56 @@ class Model:
             self._maps[key] = Buffered(getattr(self, name).map(n))
         return self._maps[key]
 
+    def fill(self, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``p`` with the values of the callable load laws at (t, q, v) (``p`` itself when
+        there are none)."""
+        if not self.callables:
+            return p
+        p = p.copy()
+        c, cd = self.joint_rates(q, v)
+        for i, (name, k) in enumerate(self.callables):
+            p[self._u0 + i] = self._call(name, t, c[k], cd[k])
+        return p
+
+    def _call(self, name: str, t: float, c: float, cd: float) -> float:
+        val = self.mech.loads[name].law.func(float(t), float(c), float(cd))
+        val = float(val)
+        if not math.isfinite(val):
+            raise ValueError(f"the law of load '{name}' returned {val} at t = {t:.9g} s")
+        return val
+
+    def input_jacobian(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """d(generalized load forces of the callable laws)/dq and /dv, (nq, nq) each: the
+        term CasADi cannot see (the law's own derivatives, by central differences)."""
+        nq = self.nq
+        dq, dv = np.zeros((nq, nq)), np.zeros((nq, nq))
+        c, cd, c_q, cd_q = self._rates_jac(q, v)
+        for name, k in self.callables:
+            hc, hd = 1e-6 * (1 + abs(c[k])), 1e-6 * (1 + abs(cd[k]))
+            f_c = (self._call(name, t, c[k] + hc, cd[k])
+                   - self._call(name, t, c[k] - hc, cd[k])) / (2 * hc)
+            f_d = (self._call(name, t, c[k], cd[k] + hd)
+                   - self._call(name, t, c[k], cd[k] - hd)) / (2 * hd)
+            g = c_q[k]  # the load's direction in generalized coordinates
+            dq += np.outer(g, f_c * c_q[k] + f_d * cd_q[k])
+            dv += np.outer(g, f_d * c_q[k])
+        return dq, dv
+
     def kkt(self, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Accelerations, multipliers and Phi_q from ``[[M, Phi_q^T], [Phi_q, D]]``.
 
         ``D`` is 1 on the diagonal of inactive lock rows (their multiplier is 0).
         """
+        p = self.fill(p, t, q, v)
         Phi_q, Qf, gamma = self._kkt_parts(q, v, t, p)
         return self.kkt_from(Phi_q, Qf, gamma, p)
 
     def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The KKT solve of :meth:`kkt` from its already evaluated parts."""
-        key = p.tobytes()
+        key = p[:self._u0].tobytes()  # the configuration, not the callable loads' values
         tpl = self._kkt_templates.get(key)
         if tpl is None:  # the constant blocks (M, D) of this configuration, built once
             tpl = self._kkt_templates[key] = self.kkt_matrix(np.zeros_like(Phi_q), p)

@@ -82,6 +82,9 @@ class IdaIntegrator(Integrator):
 
     # ------------------------------------------------------------- callbacks
     def _residual(self, t, y, yp, res):
+        if self.model.callables:  # the callable loads' values at this state
+            nq = self.model.nq
+            self.p[:] = self.model.fill(self.p, t, y[:nq], y[nq:2 * nq])
         self.t_arr[0] = t
         self.res.bind(1, y)
         self.res.bind(2, yp)
@@ -98,8 +101,16 @@ class IdaIntegrator(Integrator):
         self.cj_arr[0] = cj
         self.jac.bind(1, y)
         self.jac.bind(2, yp)
+        model = self.model
+        if model.callables:
+            nq = model.nq
+            self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
         self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
         self.jac.eval()
+        if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
+            dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
+            JJ[nq:2 * nq, :nq] -= dq
+            JJ[nq:2 * nq, nq:2 * nq] -= dv
 
     def _events(self, t, y, yp, out):
         # IDA checks the roots after every successful step (at the step's end, or at the
@@ -116,8 +127,9 @@ class IdaIntegrator(Integrator):
         nq = model.nq
         q, v = y[:nq], y[nq:2 * nq]
         if self.has_push:  # lock forces by a KKT solve at (q, v, t), never IDA's lambda
-            c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, self.p)
-            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, self.p)
+            p = model.fill(self.p, t, q, v)
+            c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
+            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
         else:
             (c, cd), lam = model.joint_rates(q, v), None
         ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out)
@@ -160,14 +172,23 @@ class IdaIntegrator(Integrator):
         # callback would abort IDA and lose the segment's outputs: it is caught here and
         # turned into a root of the always-positive first event function instead, so IDA
         # returns what it has and the run stops with everything computed so far.
+        # An exception in the residual (a user's load law failing, say) is kept and ends
+        # the segment the same way, through the next root check; the samples after the
+        # last step completed before it are dropped.
+        self.error: Exception | None = None
+        self.t_error = math.inf  # the last step completed before the error
+
         def eventsfn(t, y, yp, out):
             try:
-                self._events(t, y, yp, out)
+                if self.error is None:
+                    self._events(t, y, yp, out)
             except KeyboardInterrupt:
                 self.interrupted = True
             except _StalledError:
                 self.stalled = self.interrupted = True
-            if self.interrupted:
+            except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
+                self.error, self.t_error = e, self.t_last
+            if self.interrupted or self.error is not None:
                 out[:] = 1.0
                 out[0] = -1.0
 
@@ -177,6 +198,10 @@ class IdaIntegrator(Integrator):
             except KeyboardInterrupt:
                 self.interrupted = True
                 self._residual(t, y, yp, res)
+            except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
+                if self.error is None:
+                    self.error, self.t_error = e, self.t_last
+                res[:] = 0.0
 
         eventsfn.direction = [0] + [-1] * len(self.triggers)
         eventsfn.terminal = [True] * ne
@@ -211,8 +236,15 @@ class IdaIntegrator(Integrator):
         keep = np.arange(1, T.size)
         if extra is not None:
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
+        if self.error is not None:  # only what was computed before the failure
+            keep = keep[T[keep] <= self.t_error]
         rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], hs.current())
         t1, q1, v1 = float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy()
+        if self.error is not None:
+            e = self.error
+            raise SolverError(f"the integration failed after t = "
+                              f"{self.t_error:.9g} s: "
+                              f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
         if r.status < 0:
             message, status = self._failure(r, t1, q1)
             raise SolverError(message, status=status)

@@ -524,6 +524,9 @@ def _check_law(t: str, law: Law, target: str) -> list[Problem]:
         if not callable(law.func):
             out.append(Problem(t, "law", f"expected a callable f(t, coordinate, rate), got "
                                f"{type(law.func).__name__}"))
+        if target != "joint":
+            out.append(Problem(t, "law", "a callable law f(t, coordinate, rate) needs a "
+                               "joint: only a load on a joint coordinate can use it"))
         return out
     if law.kind not in LAWS:
         out.append(Problem(t, "law", f"expected one of {', '.join(LAWS)}, got {law.kind!r}"))

@@ -28,9 +28,10 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     n, nq, m = t.size, model.nq, model.m
     Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
     Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
-    Qf = np.asarray(Qf).T
-    gamma = np.asarray(gamma).T
-    free = model.mapped("free_fn", n)(P.T)[0].T
+    # a mapped output is (rows, n); with n = 1 it comes back 1-D: reshape, not transpose
+    Qf = np.asarray(Qf).reshape(-1, n).T
+    gamma = np.asarray(gamma).reshape(-1, n).T
+    free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n).T
     if m == 0:  # no constraint at all (a free body): M a = Q
         return Qf / model.mass, np.zeros((n, 0)), Phi_q
     A = np.zeros((n, nq + m, nq + m))
@@ -60,15 +61,17 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     mech = model.mech
     n = t.size
     P = np.array([params[c] for c in config]).reshape(n, -1)
+    if model.callables:  # the callable loads' values at each sample
+        P = np.array([model.fill(P[i], t[i], q[i], v[i]) for i in range(n)]).reshape(n, -1)
     if n:
         a, lam, Phi_q = batch_kkt(model, t, q, v, P)
-        c, cd, cdd, pts = (np.asarray(x) for x in
+        c, cd, cdd, pts = (np.asarray(x).reshape(-1, n) for x in
                            model.mapped("post_fn", n)(q.T, v.T, a.T, t))
         extras = [np.asarray(x).reshape(-1, n).T
                   for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
         phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
-        phi = np.asarray(phi_m[0]).T
-        hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).T
+        phi = np.asarray(phi_m[0]).reshape(-1, n).T
+        hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).reshape(-1, n).T
     else:
         nj = len(model.joint_names)
         a = np.zeros((0, model.nq))
