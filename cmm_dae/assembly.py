@@ -13,8 +13,9 @@ from scipy.optimize import least_squares
 
 from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
-from .events import HybridState, initial_zones
+from .hybrid import HybridState
 from .result import Event
+from .zones import initial_zones
 
 #: Position residual (m or rad) below which a loop counts as closed.
 CLOSE_TOL = 1e-10

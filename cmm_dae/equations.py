@@ -81,7 +81,7 @@ class Buffered:
 
     Two uses: ``f(*args)`` copies the arguments in and returns fresh numpy arrays (vectors
     1-D, matrices 2-D); for hot callbacks, :meth:`bind` and :meth:`bind_out` point the
-    function at caller-owned arrays once and :meth:`eval` runs it without any copy.
+    function at caller-owned arrays once and :meth:`run` evaluates it without any copy.
     """
 
     def __init__(self, fn: ca.Function):
@@ -100,16 +100,16 @@ class Buffered:
 
     def bind(self, i: int, arr: np.ndarray) -> None:
         """Read input ``i`` straight from ``arr`` (contiguous float64, kept alive by the
-        caller) at every :meth:`eval`."""
+        caller) at every :meth:`run`."""
         self.args[i] = arr
         self.buf.set_arg(i, memoryview(arr))
 
     def bind_out(self, i: int, arr: np.ndarray) -> None:
-        """Write output ``i`` straight into ``arr`` (column-major order) at :meth:`eval`."""
+        """Write output ``i`` straight into ``arr`` (column-major order) at :meth:`run`."""
         self.outs[i] = arr
         self.buf.set_res(i, memoryview(arr))
 
-    def eval(self) -> None:
+    def run(self) -> None:
         """Evaluate with the bound arrays."""
         self._call()
 

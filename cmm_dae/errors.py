@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .result import Event, Result
+from typing import Any
 
 
 class CmmError(Exception):
@@ -129,8 +126,9 @@ class SolverError(CmmError):
     """
 
     def __init__(self, message: str, *, status: Status = Status.INTEGRATOR,
-                 result: Result | None = None, configuration: Any = None,
-                 last_event: Event | None = None):
+                 result: Any = None, configuration: Any = None, last_event: Any = None):
+        # result: cmm_dae.Result, last_event: cmm_dae.Event (not imported: result.py
+        # imports this module)
         self.status = Status(status)
         self.result = result
         self.configuration = configuration

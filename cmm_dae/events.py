@@ -15,153 +15,31 @@ that asks, never an edit of the shared state undone afterwards.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from .equations import Model
-from .errors import SolverError, Status
-from .result import Configuration, Event
+from .hybrid import (
+    ZENO_DT,
+    HybridState,
+    Locked,
+    LockUpError,
+    Policy,
+    Transition,
+    Trigger,
+)
+from .kinematics import dependent_rows, impact_map, project_positions, project_velocities
+from .result import Event
+from .zones import _zone_margin, initial_zones, zone_switch
 
-#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
-#: also the shortest time between a "stay locked" decision and a release of the same joint.
-ZENO_DT = 1e-9
-
-Locked = Mapping[str, str]
-
-
-class LockUpError(SolverError):
-    """A new lock leaves the drivers no freedom: the mechanism locks up."""
-
-    def __init__(self, message: str):
-        super().__init__(message, status=Status.LOCK_UP)
-
-
-@dataclass(frozen=True)
-class Trigger:
-    """What an integrator detected: ``kind`` ``"gap"`` (an unlocked joint reached its
-    ``side`` limit) or ``"push"`` (the stop of a locked joint would have to pull)."""
-
-    joint: str
-    side: str
-    kind: str
-
-
-@dataclass(frozen=True)
-class Policy:
-    """Options of the event policy.
-
-    v_lock : float
-        A rebound slower than this (rad/s or m/s) locks the joint.
-    resolution : float
-        Shortest time between two events the integrator resolves, s: :data:`ZENO_DT` for
-        IDA, the step for the fixed-step algorithm. Bounces that accumulate (Zeno) come to
-        rest when they reach it (see :func:`zeno`).
-    """
-
-    v_lock: float = 1e-6
-    resolution: float = ZENO_DT
-
-
-@dataclass(frozen=True)
-class Transition:
-    """One event and the state (positions m/rad, velocities) right after it."""
-
-    event: Event
-    q: np.ndarray
-    v: np.ndarray
-
-
-def _key(locked: Locked) -> tuple:
-    return tuple(sorted(locked.items()))
-
-
-@dataclass
-class HybridState:
-    """The locked joints now, the registry of configurations met so far and the memory the
-    policy needs across events (last bounce of each joint, "stayed locked" decisions)."""
-
-    model: Model
-    labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
-    locked: dict[str, str] = field(default_factory=dict)
-    zones: frozenset[str] = frozenset()  # zoned loads acting now
-    slip: dict[str, int] = field(default_factory=dict)  # slipping joint -> direction
-    stick_at: dict[str, float] = field(default_factory=dict)  # stuck joint -> coordinate
-    force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
-    configurations: list[Configuration] = field(default_factory=list)
-    params: list[np.ndarray] = field(default_factory=list)
-    bounces: dict[str, list[float]] = field(default_factory=dict)  # joint -> bounce times
-    stayed: dict[str, float] = field(default_factory=dict)
-    _index: dict[tuple, int] = field(default_factory=dict)
-    _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
-
-    def limit_value(self, joint: str, side: str) -> float:
-        if side == "stick":
-            return self.stick_at[joint]
-        lim = self.model.mech.joints[joint].limits
-        return lim.lower if side == "lower" else lim.upper
-
-    def _mode(self, locked: Locked, zones, slip) -> tuple:
-        zones = self.zones if zones is None else zones
-        slip = self.slip if slip is None else slip
-        return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
-                tuple(sorted(zones)), tuple(sorted(slip.items())))
-
-    def params_of(self, locked: Locked, zones: frozenset[str] | None = None,
-                  slip: Mapping[str, int] | None = None) -> np.ndarray:
-        """Parameter vector of any lock set (cached; a trial set is not registered), with
-        the zoned loads ``zones`` acting and the joints ``slip`` slipping (default: as
-        now)."""
-        key = self._mode(locked, zones, slip)
-        p = self._trial.get(key)
-        if p is None:
-            p = self._trial[key] = self.model.params(
-                {j: val for j, _, val in key[0]}, key[1], dict(key[2]))
-        return p
-
-    def index_of(self, locked: Locked, zones: frozenset[str] | None = None,
-                 slip: Mapping[str, int] | None = None) -> int:
-        """Index of the configuration (registered, labelled, on first use)."""
-        key = self._mode(locked, zones, slip)
-        if key not in self._index:
-            lk = {j: s for j, s, _ in key[0]}
-            label, dof = self.labeller(lk) if self.labeller else ("", 0)
-            self._index[key] = len(self.configurations)
-            self.configurations.append(Configuration(
-                tuple(lk), tuple(lk.values()), dof, label, key[1], key[2]))
-            self.params.append(self.params_of(lk, key[1], dict(key[2])))
-        return self._index[key]
-
-    def current(self) -> int:
-        """Index of the configuration in force."""
-        return self.index_of(self.locked)
-
-    @property
-    def p(self) -> np.ndarray:
-        return self.params_of(self.locked)
-
-    def push(self, lam: np.ndarray, joint: str, locked: Locked | None = None) -> float:
-        """Force/torque with which the stop of a locked joint pushes it (>= 0 while held).
-
-        The lock row is ``c - L``; the generalized force on the second body along the joint
-        is ``-lambda``, which the lower stop must give positive and the upper stop negative.
-        """
-        side = (self.locked if locked is None else locked)[joint]
-        k = self.model.n_fixed + self.model.locks.index(joint)
-        return lam[k] if side == "upper" else -lam[k]  # "stick": the lock's force along +c
-
-    def static(self, joint: str) -> float:
-        """Static friction limit of a joint (0 without friction), N or N m."""
-        f = self.model.mech.joints[joint].friction
-        return f.static if f is not None else 0.0
-
-    def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
-                   locked: Locked | None = None) -> float:
-        """:meth:`push` from a KKT solve at (q, v, t) in configuration ``locked``."""
-        locked = self.locked if locked is None else locked
-        _, lam, _ = self.model.kkt(q, v, t, self.params_of(locked))
-        return self.push(lam, joint, locked)
+# The names callers reach as ``events.X`` (the policy's vocabulary), whichever module holds
+# them.
+__all__ = [
+    "ZENO_DT", "HybridState", "LockUpError", "Policy", "Transition", "Trigger", "at_limit",
+    "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
+    "impact_map", "initial_zones", "over_constrained", "project_positions",
+    "project_velocities", "release", "would_reenter", "zeno", "zone_switch",
+]
 
 
 # ------------------------------------------------------------------- detection
@@ -250,101 +128,6 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[T
     return out
 
 
-def _zone_margin(hs: HybridState, load: str, c: np.ndarray, cdot: np.ndarray) -> float:
-    """Distance of a zone's joint coordinate to the edge it moves toward, positive while
-    the load's acting state matches where the coordinate is (acting inside, idle
-    outside). As with the stops, an edge is armed only while the coordinate approaches
-    it (+1 otherwise): a coordinate at rest on an edge (a jaw closed on its stop at the
-    end of a cut) must not read as a root at every restart."""
-    k, lo, up = hs.model.zone_info[load]
-    x, xd = c[k], cdot[k]
-    tol = _edge_tol(x)  # on an edge to round-off counts as on it (see zone_switch)
-    if load in hs.zones:  # acting: it leaves through the edge ahead
-        return (x - lo) if xd < 0.0 else (up - x) if xd > 0.0 else 1.0
-    if x <= lo + tol:  # idle below the zone: it enters moving up
-        return (lo - x) if xd > 0.0 else 1.0
-    if x >= up - tol:
-        return (x - up) if xd < 0.0 else 1.0
-    return -min(x - lo, up - x)  # idle inside: a mismatch (after a finite step)
-
-
-def _edge_tol(x: float) -> float:
-    """How close to a zone edge (rad or m) a coordinate counts as on it."""
-    return 1e-9 * (1.0 + abs(x))
-
-
-def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: float
-                ) -> Transition | None:
-    """A load's zone edge reached: it starts or stops acting. At a located root (the
-    coordinate on the edge) the direction of motion decides; after a finite step, where
-    the coordinate is. None when nothing changes (a round-off root)."""
-    model = hs.model
-    k, lo, up = model.zone_info[load]
-    c, cd = model.joint_rates(q, v)
-    tol = _edge_tol(c[k])
-    if abs(c[k] - lo) <= tol:
-        inside = cd[k] > 0.0
-    elif abs(c[k] - up) <= tol:
-        inside = cd[k] < 0.0
-    else:
-        inside = lo <= c[k] <= up
-    if inside == (load in hs.zones):
-        return None
-    before = hs.current()
-    hs.zones = hs.zones | {load} if inside else hs.zones - {load}
-    name = model.joint_names[k]
-    return Transition(Event(t, "zone", name, "enter" if inside else "leave", before,
-                            hs.current(), float(cd[k]), float(cd[k]), load=load), q, v)
-
-
-def initial_zones(model: Model, q: np.ndarray) -> frozenset[str]:
-    """The zoned loads whose zone holds the joint coordinate at q (edges included)."""
-    c = model.joint_rates(q, np.zeros_like(q))[0]
-    return frozenset(n for n, (k, lo, up) in model.zone_info.items() if lo <= c[k] <= up)
-
-
-# ------------------------------------------------------------------- geometry
-def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> np.ndarray:
-    """Minimal-norm Newton projection of q onto the active position constraints."""
-    act = model.active_rows(p)
-    for _ in range(10):
-        con = model.constraints(q, t, p)
-        r = con.phi[act]
-        if np.max(np.abs(r), initial=0.0) < 1e-15:
-            break
-        # least squares: a new lock may make the rows dependent until a jam is resolved
-        q = q - np.linalg.lstsq(con.Phi_q[act], r, rcond=None)[0]
-    return q
-
-
-def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
-                       ) -> np.ndarray:
-    """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows)."""
-    act = model.active_rows(p)
-    con = model.constraints(q, t, p)
-    J = con.Phi_q[act]
-    r = J @ v + con.Phi_t[act]
-    return v - np.linalg.lstsq(J, r, rcond=None)[0]
-
-
-def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
-               lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
-    """Post-impact velocities and impulses.
-
-    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
-    prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
-    Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
-    """
-    con = model.constraints(q, t, p)
-    b = -con.Phi_t  # drivers keep their velocity, locks keep 0
-    b[model.free_rows(p) != 0.0] = 0.0
-    if lock_row is not None:
-        b[lock_row] = target
-    A = model.kkt_matrix(con.Phi_q, p)
-    sol = np.linalg.solve(A, np.concatenate([model.mass * v, b]))
-    return sol[:model.nq], sol[model.nq:]
-
-
 def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -> bool:
     """True when the active constraint rows of lock set ``locked`` are dependent at q."""
     p = hs.params_of(locked)
@@ -352,29 +135,6 @@ def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -
     s = np.linalg.svd(J, compute_uv=False)
     rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
     return rank < J.shape[0]
-
-
-def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
-                   tol: float = 1e-6) -> tuple[list[str], float]:
-    """Constraint rows that (nearly) depend on each other at q: the joints, drivers and
-    locks of a dead point or a lock-up. Returns (labels, smallest/largest singular value);
-    no labels when the rows are independent."""
-    act = model.active_rows(p)
-    J = model.constraints(q, t, p).Phi_q[act]
-    U, s, _ = np.linalg.svd(J)
-    if J.shape[0] > J.shape[1]:
-        s = np.concatenate([s, np.zeros(J.shape[0] - J.shape[1])])
-    ratio = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
-    if ratio > tol:
-        return [], ratio
-    w = np.abs(U[:, -1])
-    labels = []
-    for i in np.flatnonzero(w > 0.05 * w.max()):
-        r = model.rows[act[i]]
-        lab = f"{r.kind} {r.name}" if r.kind != "joint" else f"joint {r.name}"
-        if lab not in labels:
-            labels.append(lab)
-    return labels, ratio
 
 
 def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,

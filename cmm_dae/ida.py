@@ -89,7 +89,7 @@ class IdaIntegrator(Integrator):
         self.res.bind(1, y)
         self.res.bind(2, yp)
         self.res.bind_out(0, res)
-        self.res.eval()
+        self.res.run()
 
     def _jacobian(self, t, y, yp, res, cj, JJ):
         if self.jac is None:
@@ -106,7 +106,7 @@ class IdaIntegrator(Integrator):
             nq = model.nq
             self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
         self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
-        self.jac.eval()
+        self.jac.run()
         if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
             dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
             JJ[nq:2 * nq, :nq] -= dq

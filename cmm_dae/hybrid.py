@@ -1,0 +1,159 @@
+"""The state of a hybrid run: which joints are locked (and how), which loads act in their
+zones, which joints slip; the registry of configurations met; the records the event policy
+passes around (:class:`Trigger`, :class:`Transition`, :class:`Policy`).
+
+Lock sets are values: a trial set is an argument of the function that asks, never an edit
+of the shared state undone afterwards.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .equations import Model
+from .errors import SolverError, Status
+from .result import Configuration, Event
+
+#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
+#: also the shortest time between a "stay locked" decision and a release of the same joint.
+ZENO_DT = 1e-9
+
+
+Locked = Mapping[str, str]
+
+
+class LockUpError(SolverError):
+    """A new lock leaves the drivers no freedom: the mechanism locks up."""
+
+    def __init__(self, message: str):
+        super().__init__(message, status=Status.LOCK_UP)
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """What an integrator detected: ``kind`` ``"gap"`` (an unlocked joint reached its
+    ``side`` limit) or ``"push"`` (the stop of a locked joint would have to pull)."""
+
+    joint: str
+    side: str
+    kind: str
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Options of the event policy.
+
+    v_lock : float
+        A rebound slower than this (rad/s or m/s) locks the joint.
+    resolution : float
+        Shortest time between two events the integrator resolves, s: :data:`ZENO_DT` for
+        IDA, the step for the fixed-step algorithm. Bounces that accumulate (Zeno) come to
+        rest when they reach it (see :func:`zeno`).
+    """
+
+    v_lock: float = 1e-6
+    resolution: float = ZENO_DT
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One event and the state (positions m/rad, velocities) right after it."""
+
+    event: Event
+    q: np.ndarray
+    v: np.ndarray
+
+
+def _key(locked: Locked) -> tuple:
+    return tuple(sorted(locked.items()))
+
+
+@dataclass
+class HybridState:
+    """The locked joints now, the registry of configurations met so far and the memory the
+    policy needs across events (last bounce of each joint, "stayed locked" decisions)."""
+
+    model: Model
+    labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
+    locked: dict[str, str] = field(default_factory=dict)
+    zones: frozenset[str] = frozenset()  # zoned loads acting now
+    slip: dict[str, int] = field(default_factory=dict)  # slipping joint -> direction
+    stick_at: dict[str, float] = field(default_factory=dict)  # stuck joint -> coordinate
+    force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
+    configurations: list[Configuration] = field(default_factory=list)
+    params: list[np.ndarray] = field(default_factory=list)
+    bounces: dict[str, list[float]] = field(default_factory=dict)  # joint -> bounce times
+    stayed: dict[str, float] = field(default_factory=dict)
+    _index: dict[tuple, int] = field(default_factory=dict)
+    _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
+
+    def limit_value(self, joint: str, side: str) -> float:
+        if side == "stick":
+            return self.stick_at[joint]
+        lim = self.model.mech.joints[joint].limits
+        return lim.lower if side == "lower" else lim.upper
+
+    def _mode(self, locked: Locked, zones, slip) -> tuple:
+        zones = self.zones if zones is None else zones
+        slip = self.slip if slip is None else slip
+        return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
+                tuple(sorted(zones)), tuple(sorted(slip.items())))
+
+    def params_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                  slip: Mapping[str, int] | None = None) -> np.ndarray:
+        """Parameter vector of any lock set (cached; a trial set is not registered), with
+        the zoned loads ``zones`` acting and the joints ``slip`` slipping (default: as
+        now)."""
+        key = self._mode(locked, zones, slip)
+        p = self._trial.get(key)
+        if p is None:
+            p = self._trial[key] = self.model.params(
+                {j: val for j, _, val in key[0]}, key[1], dict(key[2]))
+        return p
+
+    def index_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                 slip: Mapping[str, int] | None = None) -> int:
+        """Index of the configuration (registered, labelled, on first use)."""
+        key = self._mode(locked, zones, slip)
+        if key not in self._index:
+            lk = {j: s for j, s, _ in key[0]}
+            label, dof = self.labeller(lk) if self.labeller else ("", 0)
+            self._index[key] = len(self.configurations)
+            self.configurations.append(Configuration(
+                tuple(lk), tuple(lk.values()), dof, label, key[1], key[2]))
+            self.params.append(self.params_of(lk, key[1], dict(key[2])))
+        return self._index[key]
+
+    def current(self) -> int:
+        """Index of the configuration in force."""
+        return self.index_of(self.locked)
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.params_of(self.locked)
+
+    def push(self, lam: np.ndarray, joint: str, locked: Locked | None = None) -> float:
+        """Force/torque with which the stop of a locked joint pushes it (>= 0 while held).
+
+        The lock row is ``c - L``; the generalized force on the second body along the joint
+        is ``-lambda``, which the lower stop must give positive and the upper stop negative.
+        """
+        side = (self.locked if locked is None else locked)[joint]
+        k = self.model.n_fixed + self.model.locks.index(joint)
+        return lam[k] if side == "upper" else -lam[k]  # "stick": the lock's force along +c
+
+    def static(self, joint: str) -> float:
+        """Static friction limit of a joint (0 without friction), N or N m."""
+        f = self.model.mech.joints[joint].friction
+        return f.static if f is not None else 0.0
+
+    def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                   locked: Locked | None = None) -> float:
+        """:meth:`push` from a KKT solve at (q, v, t) in configuration ``locked``."""
+        locked = self.locked if locked is None else locked
+        _, lam, _ = self.model.kkt(q, v, t, self.params_of(locked))
+        return self.push(lam, joint, locked)
+
