@@ -35,12 +35,14 @@ from .mechanism import (
     Spring,
     Zone,
 )
+from .params import with_params
 from .report import Comparison, compare
-from .result import Configuration, Event, Result, Stats, load_result
+from .result import Configuration, Event, Result, Stats
 from .runner import METHODS, run_dae, run_iterative, simulate
+from .storage import load_result
 from .structure import Group, Structure, labeller, structure
 from .studies import Convergence, WorkPrecision, convergence, work_precision
-from .sweep import SweepTable, sweep, with_params
+from .sweep import SweepTable, sweep
 
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",

@@ -44,7 +44,7 @@ def solve_equilibrium(mech: Mechanism) -> tuple[Mechanism, dict[str, float]]:
     ModelError
         A path that is not a parameter, or no equilibrium found (the residual named).
     """
-    from .sweep import param_value, with_params
+    from .params import param_value, with_params
 
     eq = mech.initial.equilibrium
     if not eq:

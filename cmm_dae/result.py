@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .audit import Energy, energy_audit
 from .errors import STATUS_MESSAGES, CmmError, Status
 
 
@@ -172,40 +173,6 @@ class BodySeries:
     acceleration: np.ndarray
 
 
-@dataclass(frozen=True)
-class Energy:
-    """Energy audit (J), each (n,): see :meth:`Result.energy`."""
-
-    t: np.ndarray
-    kinetic: np.ndarray
-    potential: np.ndarray
-    spring: np.ndarray
-    driver_work: np.ndarray
-    damper_dissipation: np.ndarray
-    impact_losses: np.ndarray
-    residual: np.ndarray
-    element: np.ndarray
-    load_work: np.ndarray
-    friction_loss: np.ndarray
-
-
-def _cumulative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Cumulative integral of samples f(t), Simpson between repeated (event) times."""
-    from scipy.integrate import cumulative_simpson
-
-    out = np.zeros(t.size)
-    cuts = [0] + [k + 1 for k in range(t.size - 1) if t[k + 1] == t[k]] + [t.size]
-    base = 0.0
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-        if b - a >= 3:
-            out[a + 1:b] = base + cumulative_simpson(f[a:b], x=t[a:b])
-        elif b - a == 2:
-            out[a + 1] = base + 0.5 * (f[a] + f[a + 1]) * (t[a + 1] - t[a])
-        out[a] = base if a == 0 or t[a] != t[a - 1] else out[a - 1]
-        base = out[b - 1]
-    return out
-
-
 class Result:
     """Output of :func:`cmm_dae.run_dae` or :func:`cmm_dae.run_iterative`.
 
@@ -345,57 +312,8 @@ class Result:
                 f"events={len(self.events)}, status={self.status!r})")
 
     def energy(self) -> Energy:
-        """Energy audit along the run (J): kinetic, potential (gravity), spring energy of
-        the joint springs, energy of the force elements (spring and preload), cumulative
-        driver work and load work, damper dissipation (joint and element dampers) and
-        impact losses, and the balance residual
-        ``work - (dT + dV_g + dV_s + dV_e + dissipation + impact losses)``.
-
-        Integrals use Simpson's rule between event samples (the integrands jump there), so
-        the residual measures both the solver and the output spacing.
-        """
-        d, m = self.data, self.meta
-        mass = np.asarray(m["masses"])
-        T = 0.5 * np.sum(mass * d["v"] ** 2, axis=1)
-        g = np.asarray(m["gravity"])
-        q = d["q"]
-        nb = len(m["bodies"])
-        Vg = -sum(mass[3 * i] * (g[0] * q[:, 3 * i] + g[1] * q[:, 3 * i + 1]) for i in range(nb))
-        Vs = np.zeros(self.t.size)
-        for name, (k, rest) in m["springs"].items():
-            Vs = Vs + 0.5 * k * (self.joint(name).position - rest) ** 2
-        P_diss = np.zeros(self.t.size)
-        for name, c in m["dampers"].items():
-            P_diss = P_diss + c * self.joint(name).velocity ** 2
-        Ve = np.zeros(self.t.size)
-        for k, (stiff, rest, damping, preload) in enumerate(m.get("elements", {}).values()):
-            L, Ld = d["elem_len"][:, k], d["elem_rate"][:, k]
-            Ve = Ve + 0.5 * stiff * (L - rest) ** 2 + preload * L
-            P_diss = P_diss + damping * Ld**2
-        P_drv = np.zeros(self.t.size)
-        for name in m["drivers"]:
-            P_drv = P_drv + self.driver(name).effort * self.joint(name).velocity
-        work = _cumulative(self.t, P_drv)
-        lw = _cumulative(self.t, np.sum(d["load_power"], axis=1)) if "load_power" in d \
-            else np.zeros(self.t.size)
-        diss = _cumulative(self.t, P_diss)
-        P_fr = -np.sum(d["friction"] * d["cd"], axis=1) if "friction" in d \
-            else np.zeros(self.t.size)
-        fr_loss = _cumulative(self.t, P_fr)
-        lost = np.zeros(self.t.size)
-        after = d.get("event_sample", np.zeros(0, int))
-        seen: dict[float, int] = {}
-        for n, e in enumerate(self.events):
-            if n < after.size:  # each event books its loss from the sample right after it
-                i = int(after[n])
-            else:  # a file written before event samples were kept: the k-th event at a
-                k = seen.get(e.t, 0)  # time acts from its (k+1)-th sample on
-                seen[e.t] = k + 1
-                i = int(np.searchsorted(self.t, e.t, side="left")) + k + 1
-            lost[min(i, self.t.size):] += e.energy_lost
-        E = T + Vg + Vs + Ve
-        resid = work + lw - (E - E[0]) - diss - lost - fr_loss
-        return Energy(self.t, T, Vg, Vs, work, diss, lost, resid, Ve, lw, fr_loss)
+        """Energy audit along the run (J); see :func:`cmm_dae.audit.energy_audit`."""
+        return energy_audit(self)
 
     # ------------------------------------------------------------------ tables
     def event_table(self) -> str:
@@ -465,55 +383,3 @@ class Result:
         return path
 
 
-def load_result(path: str | Path) -> Result:
-    """Read a Result written by :meth:`Result.save`.
-
-    Raises
-    ------
-    CmmError
-        The file is missing, not a saved Result, truncated or corrupted (named, with what
-        was wrong).
-    """
-    import zipfile
-
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            if f.read(2) != b"PK":  # every .npz is a zip archive
-                raise CmmError(f"'{path}' is not a result file (not an .npz archive written "
-                               "by Result.save)")
-        with np.load(path, allow_pickle=False) as z:
-            if "__meta__" not in z.files:
-                raise CmmError(f"'{path}' is not a cmm_dae result file (no '__meta__' entry; "
-                               "write one with Result.save)")
-            meta = json.loads(str(z["__meta__"]))
-            data = {k: np.asarray(z[k]) for k in z.files if k != "__meta__"}
-        configs = [Configuration(tuple(c["locked"]), tuple(c["sides"]), int(c["dof"]),
-                                 str(c["label"]), tuple(c.get("zones", ())),
-                                 tuple((j, int(s)) for j, s in c.get("slip", ())))
-                   for c in meta.pop("configurations")]
-        events = [Event(**e) for e in meta.pop("events")]
-        stats = Stats(**meta.pop("stats"))
-        status = meta.pop("status")
-        message = meta.pop("message", status)
-        try:
-            status = Status(status)
-        except ValueError:  # a file from before status codes: a free sentence
-            message, status = status, Status.INTEGRATOR
-        res = Result(meta, data, configs, events, stats, status, message)
-        n = res.t.size
-        for k in ("q", "v", "c", "config"):
-            if data[k].shape[0] != n:
-                raise ValueError(f"array '{k}' has {data[k].shape[0]} rows for {n} times")
-        return res
-    except CmmError:
-        raise
-    except FileNotFoundError:
-        raise CmmError(f"no such result file: '{path}'") from None
-    except OSError as e:
-        raise CmmError(f"cannot read result file '{path}': {e.strerror or e}") from None
-    except (zipfile.BadZipFile, EOFError) as e:
-        raise CmmError(f"'{path}' is truncated or not a result file ({e})") from None
-    except (KeyError, TypeError, ValueError, AttributeError, RecursionError) as e:
-        raise CmmError(f"'{path}' is a corrupted result file ({type(e).__name__}: {e})"
-                       ) from None

@@ -16,145 +16,19 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import CmmError, ModelError, Problem
-from .mechanism import Damper, Limits, Mechanism, Spring
+from .mechanism import Mechanism
+from .params import with_params
 from .result import Result
 
 Metric = Callable[[Result], Mapping[str, float]]
 #: Most cases in one sweep (a grid's size is the product of its value counts).
 MAX_CASES = 1_000_000
-
-_SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
-
-
-#: Scalar numeric fields a dotted path may set, per table (sub-tables as "spring.rest").
-_FIELDS = {
-    "bodies": ("mass", "inertia"),
-    "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
-               "limits.lower", "limits.upper"),
-    "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
-}
-#: Driver fields each motion law reads.
-_DRIVER_USES = {"constant_speed": ("initial", "speed"), "polynomial": (),
-                "harmonic": ("initial", "amplitude", "frequency", "phase"), "table": ()}
-
-
-def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
-    """Why setting this (existing, numeric) path would change nothing, or None."""
-    table, name, fld = parts[0], parts[1], ".".join(parts[2:])
-    if table == "joints":
-        j = mech.joints[name]
-        if fld == "angle" and j.type != "prismatic":
-            return f"joint '{name}' is revolute: 'angle' is read for prismatic joints only"
-        if fld == "restitution" and j.limits is None:
-            return f"joint '{name}' has no limits for a restitution to act at"
-        if fld == "spring.rest" and j.spring is None:
-            return (f"joint '{name}' has no spring: set joints.{name}.spring.stiffness to "
-                    "give it one")
-    if table == "drivers":
-        d = mech.drivers[name]
-        if fld not in _DRIVER_USES[d.motion]:
-            uses = ", ".join(_DRIVER_USES[d.motion]) or "only its lists"
-            return f"driver '{name}' moves by '{d.motion}', which reads {uses}"
-    return None
-
-
-def path_problem(mech: Mechanism, path: str) -> Problem | None:
-    """Why a dotted path is not a parameter that can be set (None when it is)."""
-    parts = path.split(".")
-    tables = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}
-    if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
-            and ".".join(parts[2:]) in _FIELDS[parts[0]]:
-        why = _no_effect(mech, parts)
-        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
-    if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
-            and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
-                                             and parts[1] in ("x", "y")):
-        return None
-    return Problem("sweep", path, "not a parameter of the mechanism; e.g. "
-                   "joints.D.spring.stiffness, bodies.slider.mass, joints.E.limits.upper, "
-                   "drivers.A.speed")
-
-
-def param_value(mech: Mechanism, path: str) -> float:
-    """The current value of a dotted model path (see :func:`with_params`); a spring,
-    damper or limit that does not exist reads as 0 (stiffness, damping) or NaN."""
-    parts = path.split(".")
-    bad = path_problem(mech, path)
-    if bad is not None:
-        raise ModelError(bad, mech.source)
-    if parts[0] == "gravity":
-        return mech.gravity["xy".index(parts[1])]
-    if parts[0] == "initial":
-        table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
-        return float(table.get(parts[2], math.nan))
-    obj = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}[parts[0]]
-    obj = obj[parts[1]]
-    for name in parts[2:]:
-        obj = getattr(obj, name) if obj is not None else None
-    return float(obj) if obj is not None else (0.0 if parts[-1] in ("stiffness", "damping")
-                                                 else math.nan)
-
-
-def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
-    """A copy of ``mech`` with dotted-path values replaced, validated again.
-
-    Paths: ``bodies.NAME.mass|inertia``, ``joints.NAME.restitution|angle``,
-    ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
-    ``joints.NAME.limits.lower|upper``, ``drivers.JOINT.speed|initial|amplitude|...``,
-    ``initial.joints.NAME``, ``initial.velocities.NAME``, ``gravity.x|y``.
-
-    Raises
-    ------
-    ModelError
-        A path that is not a numeric parameter of the mechanism, a value that is not a
-        number, or a path whose value the mechanism never reads (e.g. the amplitude of a
-        constant-speed driver), each named.
-    """
-    bodies, joints = dict(mech.bodies), dict(mech.joints)
-    drivers = dict(mech.drivers)
-    ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
-    gravity = list(mech.gravity)
-    problems = []
-    for path, value in values.items():
-        parts = str(path).split(".")
-        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
-            problems.append(Problem("sweep", path, f"expected a number, got {value!r}"))
-            continue
-        value = float(value)
-        tables = {"bodies": bodies, "joints": joints, "drivers": drivers}
-        bad = path_problem(mech, str(path))
-        if bad is not None:
-            problems.append(bad)
-        elif parts[0] in tables:
-            table = tables[parts[0]]
-            obj = table[parts[1]]
-            if len(parts) == 3:
-                table[parts[1]] = replace(obj, **{parts[2]: value})
-            else:
-                sub = getattr(obj, parts[2])
-                if sub is None:
-                    sub = _SUB[parts[2]](**({"stiffness": 0.0} if parts[2] == "spring"
-                                            else {"damping": 0.0}
-                                            if parts[2] == "damper" else {}))
-                table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]: value})})
-        elif parts[0] == "initial":
-            (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
-        else:
-            gravity["xy".index(parts[1])] = value
-    if problems:
-        raise ModelError(problems, mech.source)
-    from .mechanism import Initial
-
-    return mech.replace(bodies=bodies, joints=joints, drivers=drivers,
-                        initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
-                        gravity=tuple(gravity))
 
 
 def cases_from(params: Mapping[str, Iterable[float]] | list[Mapping[str, float]]
