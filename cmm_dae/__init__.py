@@ -54,4 +54,4 @@ __all__ = [
     "structure", "sweep", "SweepTable", "with_params", "work_precision", "WorkPrecision",
     "Zone",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
