@@ -58,10 +58,12 @@ def validate(m: Any) -> list[Problem]:
             out.append(Problem(t, "", "'ground' is reserved for the frame"))
         if not (_finite(b.mass) and b.mass > 0):
             out.append(Problem(t, "mass", f"expected a positive mass in kg, got {b.mass}"))
-        if not (_finite(b.inertia) and b.inertia > 0):
-            out.append(Problem(t, "inertia", "expected a positive centroidal inertia in kg m^2, "
+        if not (_finite(b.inertia) and b.inertia >= 0):
+            out.append(Problem(t, "inertia", "expected a centroidal inertia >= 0 in kg m^2 "
+                               "(0: a point mass, whose rotation its joints must fix), "
                                f"got {b.inertia:.6g}" if _finite(b.inertia) else
-                               f"expected a positive centroidal inertia, got {b.inertia}"))
+                               "expected a centroidal inertia >= 0 in kg m^2, "
+                               f"got {b.inertia}"))
     used_bodies: set[str] = set()
     for name, j in m.joints.items():
         t = f"joints.{name}"

@@ -275,9 +275,9 @@ def _body(r: _Reader, name: str, d: Any) -> Body:
         else:
             p = points[about]
             inertia_c = inertia - mass * ((p[0] - centroid[0]) ** 2 + (p[1] - centroid[1]) ** 2)
-            if math.isfinite(inertia_c) and inertia_c <= 0:
+            if math.isfinite(inertia_c) and inertia_c < 0:
                 r.bad(t, "inertia", f"{inertia} kg m^2 about '{about}' leaves a centroidal "
-                      f"inertia of {inertia_c:.6g} <= 0 (parallel-axis theorem)")
+                      f"inertia of {inertia_c:.6g} < 0 (parallel-axis theorem)")
                 inertia_c = math.nan
             inertia = inertia_c
     return Body(name, mass, inertia, centroid, points, guess)

@@ -41,7 +41,11 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     A[:, nq:, :nq] = Phi_q
     A[:, d[nq:], d[nq:]] = free
     rhs = np.concatenate([Qf, gamma], axis=1)
-    sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+    try:
+        sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a singular sample (the state a run failed at): the
+        sol = np.array([np.linalg.lstsq(Ai, bi, rcond=None)[0]  # rest still count
+                        for Ai, bi in zip(A, rhs, strict=True)])
     return sol[:, :nq], sol[:, nq:], Phi_q
 
 

@@ -185,9 +185,19 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         build = time.perf_counter() - wall0
         hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
         q, v, events = start_state(model, hs)
+        model.kkt(q, v, 0.0, hs.p)  # the accelerations must be determined at the start
     except CmmError:
         raise
-    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as e:
+    except np.linalg.LinAlgError as e:
+        point = [n for n, b in mech.bodies.items() if b.inertia == 0.0]
+        if point:
+            raise AssemblyError(
+                f"the accelerations at t = 0 are undetermined: the rotation of point mass "
+                f"{', '.join(repr(n) for n in point)} (inertia 0) is not fixed by its joints; "
+                "give it an inertia or a second joint that fixes its angle",
+                joints=[]) from e
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    except (ArithmeticError, ValueError, RuntimeError) as e:
         raise AssemblyError(f"the initial state cannot be computed: {e}") from e
     stats = Stats(build_time=build, method=cls.method)
     rec = Recorder()

@@ -32,7 +32,8 @@ CASES = [
     ("mass = 0.1\n", "mass = inf\n", r"\[bodies\.crank\] mass: expected a finite number"),
     ("mass = 0.1\n", "mas = 0.1\n", r"\[bodies\.crank\] mas: unknown key; did you mean 'mass'"),
     ("mass = 0.1\n", "", r"\[bodies\.crank\] mass: missing"),
-    ("inertia = 2.5e-5 ", "inertia = 0.0 ", r"\[bodies\.crank\] inertia: expected a positive"),
+    ("inertia = 2.5e-5 ", "inertia = -2.5e-5 ",
+     r"\[bodies\.crank\] inertia: expected a centroidal inertia >= 0"),
     ('connects = ["crank.B", "rod.B"]', 'connects = ["crank.B", "rdo.B"]',
      r"\[joints\.B\] connects: unknown body 'rdo'"),
     ('connects = ["crank.B", "rod.B"]', 'connects = ["crank.X", "rod.B"]',
@@ -195,7 +196,7 @@ MORE_CASES = [
     ("guess = [0.24, 0.0, 0.0]", "guess = [0.24, 0.0]",
      r"\[bodies\.slider\] guess: expected a list of 3 numbers"),
     ("inertia = 1.0e-4\n", "inertia = -1.0e-4\n",
-     r"\[bodies\.slider\] inertia: expected a positive centroidal inertia"),
+     r"\[bodies\.slider\] inertia: expected a centroidal inertia >= 0"),
     ('motion = "constant_speed"\ninitial', 'motion = "table"\ntimes = [0.0, 1.0, 0.5]\n'
      'values = [0.5, 1.0, 2.0]\n#', r"\[drivers\.A\] times: expected strictly increasing"),
 ]
