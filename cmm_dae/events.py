@@ -92,39 +92,28 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
 
 def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[Trigger]:
     """Triggers crossed at a state reached by a finite step (the fixed-step algorithm):
-    a joint beyond its stop while moving toward it, a locked joint whose stop would pull.
-    A joint that stayed locked at this very instant is not reported again."""
+    those whose event function (:func:`event_values`, IDA's too) is negative there. A gap
+    must be beyond its stop by more than round-off (a just-released joint sits a hair
+    beyond it); a joint that stayed locked at this very instant is not reported again."""
     model = hs.model
     triggers = event_list(model, hs.locked)
     if not triggers:
         return []
     c, cd = model.joint_rates(q, v)
-    lam = None
+    needs_lam = any(tr.kind in ("push", "slip") for tr in triggers)
+    lam = model.kkt(q, v, t, hs.p)[1] if needs_lam else None
+    values = np.empty(len(triggers))
+    event_values(hs, c, cd, lam, triggers, values)
     out = []
-    for tr in triggers:
-        if tr.kind == "zone":
-            if _zone_margin(hs, tr.joint, c, cd) < 0.0:
-                out.append(tr)
-            continue
-        k = model.jidx[tr.joint]
-        if tr.kind == "rate":
-            if hs.slip.get(tr.joint, 0) * cd[k] < 0.0:
-                out.append(tr)
-            continue
+    for tr, val in zip(triggers, values, strict=True):
         if tr.kind == "gap":
-            L = hs.limit_value(tr.joint, tr.side)
-            beyond = (L - c[k]) if tr.side == "lower" else (c[k] - L)
-            toward = (cd[k] <= 0.0) if tr.side == "lower" else (cd[k] >= 0.0)
-            # round-off leaves a just-released joint a hair beyond its stop: not a crossing
-            if beyond > 1e-12 * (1.0 + abs(L)) and toward:
-                out.append(tr)
-        elif hs.stayed.get(tr.joint) != t:
-            if lam is None:
-                lam = model.kkt(q, v, t, hs.p)[1]
-            f = hs.push(lam, tr.joint)
-            if (tr.kind == "slip" and abs(f) > hs.static(tr.joint)) or \
-                    (tr.kind == "push" and f + hs.static(tr.joint) < 0.0):
-                out.append(tr)
+            crossed = val < -1e-12 * (1.0 + abs(hs.limit_value(tr.joint, tr.side)))
+        elif tr.kind in ("push", "slip"):
+            crossed = val < 0.0 and hs.stayed.get(tr.joint) != t
+        else:
+            crossed = val < 0.0
+        if crossed:
+            out.append(tr)
     return out
 
 
@@ -138,8 +127,9 @@ def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -
 
 
 def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
-                       locked: Locked) -> float:
-    """Acceleration of a joint coordinate from a KKT solve in configuration ``locked``."""
+                       locked: Locked) -> tuple[float, float]:
+    """Acceleration of a joint coordinate from a KKT solve in configuration ``locked``,
+    and the largest body acceleration (its scale)."""
     model = hs.model
     a, _, _ = model.kkt(q, v, t, hs.params_of(locked))
     return float(model.joint_accelerations(q, v, a, t)[model.jidx[joint]]), \
