@@ -13,6 +13,7 @@ from scipy.optimize import least_squares
 
 from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
+from .events import stick_or_slip
 from .hybrid import HybridState
 from .result import Event
 from .zones import initial_zones
@@ -182,26 +183,13 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
             before = hs.current()
             hs.locked = trial
             events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
-    c0, cd0 = model.joint_rates(q, v)
+    cd0 = model.joint_rates(q, v)[1]
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
         if name in hs.locked:
             continue
         k = model.jidx[name]
         if cd0[k] != 0.0:
             hs.slip = {**hs.slip, name: 1 if cd0[k] > 0 else -1}
-            continue
-        hs.stick_at[name] = float(c0[k])
-        trial = {**hs.locked, name: "stick"}
-        force = hs.lock_force(q, v, t0, name, trial)
-        before = hs.current()
-        if abs(force) <= hs.static(name):
-            hs.locked = trial
-            events.append(Event(t0, "stick", name, "stick", before, hs.current(), 0.0, 0.0,
-                                {}, 0.0, force))
-        else:
-            del hs.stick_at[name]
-            s = -1 if force > 0.0 else 1
-            hs.slip = {**hs.slip, name: s}
-            events.append(Event(t0, "slip", name, "positive" if s > 0 else "negative", before,
-                                hs.current(), 0.0, 0.0, {}, 0.0, force))
+        else:  # the same decision as when a slipping joint comes to rest
+            events.append(stick_or_slip(hs, q, v, t0, name).event)
     return q, v, events

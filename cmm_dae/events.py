@@ -38,7 +38,7 @@ __all__ = [
     "ZENO_DT", "HybridState", "LockUpError", "Policy", "Transition", "Trigger", "at_limit",
     "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
     "impact_map", "initial_zones", "over_constrained", "project_positions",
-    "project_velocities", "release", "would_reenter", "zeno", "zone_switch",
+    "project_velocities", "release", "stick_or_slip", "would_reenter", "zeno", "zone_switch",
 ]
 
 
@@ -177,7 +177,7 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
     if tr.kind == "gap":
         return at_limit(hs, q, v, t, tr.joint, tr.side, policy)
     if tr.kind == "rate":
-        return [rate_zero(hs, q, v, t, tr.joint)]
+        return [stick_or_slip(hs, q, v, t, tr.joint)]
     force = hs.lock_force(q, v, t, tr.joint)
     if tr.kind == "slip":
         return [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)]
@@ -195,24 +195,37 @@ def _direction(force: float) -> int:
     return -1 if force > 0.0 else 1
 
 
+def _begin_slip(hs: HybridState, t: float, joint: str, force: float, before: int,
+                rate: float) -> Event:
+    """The joint (no longer locked) slips the way the loads push it; the slip event."""
+    s = _direction(force)
+    hs.stick_at.pop(joint, None)
+    hs.slip = {**hs.slip, joint: s}
+    return Event(t, "slip", joint, "positive" if s > 0 else "negative", before, hs.current(),
+                 rate, rate, {}, 0.0, float(force))
+
+
+def _impulses(model: Model, imp: np.ndarray) -> dict[str, float]:
+    """The nonzero impulse of each constraint row, by row label (N s or N m s)."""
+    return {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
+            if x != 0.0}
+
+
 def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
               force: float) -> Event:
     """A stuck joint whose force exceeds static friction starts to slip."""
     before = hs.current()
-    s = _direction(force)
     hs.locked = {j: x for j, x in hs.locked.items() if j != joint}
-    hs.stick_at.pop(joint, None)
-    hs.slip = {**hs.slip, joint: s}
-    return Event(t, "slip", joint, "positive" if s > 0 else "negative", before, hs.current(),
-                 0.0, 0.0, {}, 0.0, float(force))
+    return _begin_slip(hs, t, joint, force, before, 0.0)
 
 
-def rate_zero(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
-              ) -> Transition:
-    """A slipping joint's rate reached zero: it sticks if the force it must then carry is
-    within static friction, else it slips on the other way. The lock puts the rate
-    exactly to zero (a vanishing impulse at a located root; the fixed-step algorithm's
-    overshoot of one step otherwise)."""
+def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
+                  ) -> Transition:
+    """A joint with friction at rest (a slipping joint whose rate reached zero, or one
+    that starts at rest): it sticks if the force it must then carry is within static
+    friction, else it slips (on the other way). The lock puts the rate exactly to zero (a
+    vanishing impulse at a located root; the fixed-step algorithm's overshoot of one step
+    otherwise; nothing at all for a rate already zero)."""
     model = hs.model
     k = model.jidx[joint]
     before = hs.current()
@@ -221,24 +234,19 @@ def rate_zero(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: st
     hs.stick_at[joint] = float(c[k])
     trial = {**hs.locked, joint: "stick"}
     p = hs.params_of(trial, slip=slip)
-    row = model.n_fixed + model.locks.index(joint)
-    T_minus = 0.5 * np.sum(model.mass * v**2)
-    v0, imp = impact_map(model, q, v, t, p, row, 0.0)
+    v0, imp = v, np.zeros(model.m)
+    if cd[k] != 0.0:
+        v0, imp = impact_map(model, q, v, t, p, model.n_fixed + model.locks.index(joint), 0.0)
     _, lam, _ = model.kkt(q, v0, t, p)
     force = hs.push(lam, joint, trial)
+    hs.slip = slip
     if abs(force) <= hs.static(joint):
-        hs.locked, hs.slip = trial, slip
-        impulses = {f"{r.kind} {r.name}": float(x) for r, x in
-                    zip(model.rows, imp, strict=True) if x != 0.0}
-        lost = float(T_minus - 0.5 * np.sum(model.mass * v0**2))
+        hs.locked = trial
+        lost = float(0.5 * np.sum(model.mass * (v**2 - v0**2)))
         return Transition(Event(t, "stick", joint, "stick", before, hs.current(),
-                                float(cd[k]), 0.0, impulses, lost, float(force)), q, v0)
-    hs.stick_at.pop(joint, None)
-    s = _direction(force)
-    hs.slip = {**slip, joint: s}
-    return Transition(Event(t, "slip", joint, "positive" if s > 0 else "negative", before,
-                            hs.current(), float(cd[k]), float(cd[k]), {}, 0.0, float(force)),
-                      q, v)
+                                float(cd[k]), 0.0, _impulses(model, imp), lost, float(force)),
+                          q, v0)
+    return Transition(_begin_slip(hs, t, joint, force, before, float(cd[k])), q, v)
 
 
 def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -326,12 +334,10 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         hs.bounces.setdefault(joint, []).append(t)
         if joint in hs.slip:  # it slides back the other way
             hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
-    impulses = {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
-                if x != 0.0}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
     kind = "bounce" if bounce else ("lock" if abs(cdm) <= policy.v_lock else "limit")
     out.append(Transition(Event(t, kind, joint, side, before, hs.current(), cdm, cdp,
-                                impulses, lost), q, v_plus))
+                                _impulses(model, imp), lost), q, v_plus))
     if not bounce:
         force = hs.lock_force(q, v_plus, t, joint)
         if force < 0.0:  # the stop would have to pull at once: no chattering
