@@ -362,8 +362,12 @@ class Model:
         for name in zones:
             p[2 * nl + self.zoned.index(name)] = 1.0
         for name, s in (slip or {}).items():
-            p[2 * nl + len(self.zoned) + self.frictional.index(name)] = float(s)
+            p[self.slip_slot(name)] = float(s)
         return p
+
+    def slip_slot(self, joint: str) -> int:
+        """Index in ``p`` of a frictional joint's slip direction (+1, -1, 0)."""
+        return 2 * len(self.locks) + len(self.zoned) + self.frictional.index(joint)
 
     def rows_of(self, kind: str, name: str) -> list[int]:
         """Indices of the rows of one joint, driver or lock."""

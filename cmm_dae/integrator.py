@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 
 from .equations import Model
-from .events import HybridState, Policy, Transition, Trigger
+from .hybrid import HybridState, Policy, Transition, Trigger
 from .result import Stats
 
 

@@ -112,15 +112,15 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
     # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
     friction = np.zeros((n, nj))
-    nl, nz = len(model.locks), len(model.zoned)
-    for f, name in enumerate(model.frictional):
+    for name in model.frictional:
         k = model.joint_names.index(name)
         fk = mech.joints[name].friction.kinetic
-        s = P[:, 2 * nl + nz + f] if n else np.zeros(0)
+        s = P[:, model.slip_slot(name)] if n else np.zeros(0)
         row = model.n_fixed + model.locks.index(name)
         lock = -lam[:, row] if n else np.zeros(0)  # the lock row's force along +c
-        sides = np.array([dict(zip(configurations[c].locked, configurations[c].sides,
-                                   strict=True)).get(name, "") for c in config])
+        side_of = np.array([dict(zip(c.locked, c.sides, strict=True)).get(name, "")
+                            for c in configurations])  # per configuration, once
+        sides = side_of[np.asarray(config, int)]
         stuck = sides == "stick"
         pull = ((sides == "lower") & (lock < 0)) | ((sides == "upper") & (lock > 0))
         friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))

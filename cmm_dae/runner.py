@@ -24,7 +24,7 @@ from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
 from .integrator import Integrator, Recorder, RunOptions
-from .iterative import IterativeIntegrator, steps_needed
+from .iterative import IterativeIntegrator
 from .mechanism import Mechanism
 from .post import build_result
 from .result import Result, Stats
@@ -266,4 +266,4 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
                     model=model)
 
 
-__all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate", "steps_needed"]
+__all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate"]
