@@ -19,6 +19,7 @@ from .errors import (
     SolverError,
     Status,
 )
+from .library import example, examples
 from .loader import from_dict, load
 from .mechanism import (
     Body,
@@ -47,6 +48,7 @@ from .sweep import SweepTable, sweep
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
     "Configuration", "Convergence", "convergence", "Damper", "Driver", "Element", "Event",
+    "example", "examples",
     "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",
     "Load",
     "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",

@@ -1,7 +1,8 @@
 """Command line interface ``cmm-dae``.
 
 Commands: ``run``, ``iterate``, ``compare``, ``events``, ``structure``, ``animate``, ``plot``,
-``bench``.
+``sweep``, ``bench``, ``examples``, ``schema``. A model is a TOML file or the name of a
+shipped example (``cmm-dae compare double_folded --out out``).
 Bad input gives a clear message on stderr and a non-zero exit code (2: bad input, 3: the
 run failed part-way), never a traceback.
 """
@@ -15,10 +16,12 @@ from pathlib import Path
 from .errors import CmmError, SolverError
 
 
-def _load(path: str):
+def _load(arg: str):
+    """A model given as a file path or as the name of a shipped example."""
     from . import load
+    from .library import model_path
 
-    return load(path)
+    return load(model_path(arg))
 
 
 def _summary(res) -> None:
@@ -47,7 +50,7 @@ def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
     res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
-                   output_dt=args.output_dt)
+                   output_dt=args.output_dt, progress=args.progress)
     _summary(res)
     _save(res, args)
     return 0
@@ -56,7 +59,8 @@ def _run(args: argparse.Namespace) -> int:
 def _iterate(args: argparse.Namespace) -> int:
     from . import simulate
 
-    res = simulate(_load(args.model), args.t_end, method="iterative", dt=args.dt)
+    res = simulate(_load(args.model), args.t_end, method="iterative", dt=args.dt,
+                   progress=args.progress)
     _summary(res)
     _save(res, args)
     return 0
@@ -74,7 +78,7 @@ def _compare(args: argparse.Namespace) -> int:
             "iterative": dict(method="iterative", dt=args.dt)}
     res, notes = [], []
     for name, kw in runs.items():  # a failing run still gives its partial Result
-        r = simulate(mech, args.t_end, model=model, throw=False, **kw)
+        r = simulate(mech, args.t_end, model=model, throw=False, progress=args.progress, **kw)
         if not r.success:
             notes.append(f"the {name} run failed at t = {r.t[-1]:.6g} s ({r.status}): "
                          f"{r.message}; the comparison covers what both runs reached")
@@ -111,12 +115,13 @@ def _compare(args: argparse.Namespace) -> int:
 def _result_of(source: str, t_end: float):
     """A saved Result (.npz) or a run of a model file (.toml); anything else is refused."""
     from . import load_result, simulate
+    from .library import model_path
 
-    path = Path(source)
+    path = model_path(source)
     if path.suffix == ".npz":
         return load_result(path)
     if path.suffix == ".toml":
-        return simulate(_load(source), t_end)
+        return simulate(_load(str(path)), t_end)
     raise CmmError(f"'{source}': expected a model file (.toml) or a saved result (.npz), "
                    f"not a '{path.suffix or 'suffix-less'}' file")
 
@@ -134,7 +139,7 @@ def _structure(args: argparse.Namespace) -> int:
 
 
 def _animate(args: argparse.Namespace) -> int:
-    from .plots import animate
+    from .animation import animate
 
     res = _result_of(args.source, args.t_end)
     print(f"wrote {animate(res, args.out, fps=args.fps, max_frames=args.frames)}")
@@ -162,11 +167,9 @@ def _plot(args: argparse.Namespace) -> int:
 
 def _bench(args: argparse.Namespace) -> int:
     from .bench import bench_models, table
+    from .library import examples_dir, model_path
 
-    paths = [Path(m) for m in args.models] or sorted(
-        (Path(__file__).resolve().parent.parent / "models").glob("*.toml"))
-    if not paths:
-        raise CmmError("no model files given and none found in models/")
+    paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,
                              repeat=args.repeat)))
     return 0
@@ -194,15 +197,33 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _examples(args: argparse.Namespace) -> int:
+    from .library import example, examples
+
+    for name in examples():
+        print(f"{name:<28} {example(name)}")
+    return 0
+
+
+def _schema(args: argparse.Namespace) -> int:
+    from . import schema
+
+    sys.stdout.write(schema.reference_markdown() if args.markdown else schema.json_text())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
                                  "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
                                  "against the paper's fixed-step iterative algorithm.")
     sub = ap.add_subparsers(dest="command", required=True)
 
-    def common(p, model_help="mechanism TOML file"):
+    def common(p, model_help="mechanism TOML file or the name of a shipped example "
+               "(cmm-dae examples lists them)"):
         p.add_argument("model", help=model_help)
         p.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+        p.add_argument("--progress", action="store_true",
+                       help="progress bar of the simulated time on stderr")
 
     r = sub.add_parser("run", help="simulate a model with IDA and print a summary")
     common(r)
@@ -230,29 +251,29 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_compare)
 
     e = sub.add_parser("events", help="event table of a model run or of a saved result")
-    e.add_argument("source", help="mechanism TOML file or saved result (.npz)")
+    e.add_argument("source", help="model file or example name, or a saved result (.npz)")
     e.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     e.set_defaults(func=_events)
 
     s = sub.add_parser("structure", help="mobility, active parts and Assur groups")
-    s.add_argument("model", help="mechanism TOML file")
+    s.add_argument("model", help="model file or example name")
     s.set_defaults(func=_structure)
 
     a = sub.add_parser("animate", help="GIF of the mechanism moving (locked joints in red)")
-    a.add_argument("source", help="mechanism TOML file or saved result (.npz)")
+    a.add_argument("source", help="model file or example name, or a saved result (.npz)")
     a.add_argument("--out", required=True, help="output .gif")
     a.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     a.add_argument("--fps", type=int, default=20, help="frames per second (20)")
-    a.add_argument("--frames", type=int, default=200, help="most frames (200)")
+    a.add_argument("--frames", type=int, default=120, help="most frames (120)")
     a.set_defaults(func=_animate)
 
     p = sub.add_parser("plot", help="paper-style figures of one run")
-    p.add_argument("source", help="mechanism TOML file or saved result (.npz)")
+    p.add_argument("source", help="model file or example name, or a saved result (.npz)")
     p.add_argument("--out", required=True, help="directory for the PNGs")
     p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     p.set_defaults(func=_plot)
     sw = sub.add_parser("sweep", help="parameter sweep (local processes or a Dask cluster)")
-    sw.add_argument("model", help="mechanism TOML file")
+    sw.add_argument("model", help="model file or example name")
     sw.add_argument("--param", action="append", default=[], metavar="PATH=A:B:N",
                     help="e.g. joints.D.spring.stiffness=0.5:3:20 (repeat for a grid)")
     sw.add_argument("--out", required=True, help="CSV written as runs finish (and resumed)")
@@ -261,6 +282,14 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--workers", type=int, default=None, help="local processes (all cores)")
     sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
     sw.set_defaults(func=_sweep)
+
+    ex = sub.add_parser("examples", help="list the shipped example models")
+    ex.set_defaults(func=_examples)
+
+    sc = sub.add_parser("schema", help="print the JSON Schema of model files (or the "
+                        "model-file reference with --markdown)")
+    sc.add_argument("--markdown", action="store_true", help="the reference as Markdown")
+    sc.set_defaults(func=_schema)
 
     bn = sub.add_parser("bench", help="benchmark models: IDA vs the iterative algorithm")
     bn.add_argument("models", nargs="*", help="model files (default: every shipped model)")

@@ -120,6 +120,8 @@ class IdaIntegrator(Integrator):
             self.n_steps += 1
             if self.n_steps > self.step_budget:
                 raise _StalledError
+            if self.opts.progress is not None:
+                self.opts.progress.update(t)
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
         if not self.triggers:
             return

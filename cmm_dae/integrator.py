@@ -17,6 +17,7 @@ import numpy as np
 
 from .equations import Model
 from .hybrid import HybridState, Policy, Transition, Trigger
+from .progress import Bar
 from .result import Stats
 
 
@@ -33,6 +34,8 @@ class RunOptions:
     max_events: int = 1000
     v_lock: float = 1e-6
     max_steps: int = 500_000
+    #: a progress bar moved to the time reached (None: none)
+    progress: Bar | None = None
 
 
 @dataclass(frozen=True)

@@ -138,6 +138,8 @@ class IterativeIntegrator(Integrator):
             v = st.velocities(q, t_new, rates)
             t = t_new
             self.stats.steps += 1
+            if opts.progress is not None:
+                opts.progress.update(t)
             crossed = ev.crossings(hs, q, v, t)
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch

@@ -14,6 +14,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from . import schema
 from .errors import ModelError, Problem
 from .mechanism import (
     LAWS,
@@ -33,32 +34,22 @@ from .mechanism import (
     Zone,
     validate,
 )
+from .schema import SPEC, default, keys_of
 
 _REQUIRED = object()
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
 MAX_FILE_BYTES = 16 * 2**20
 
-TOP_KEYS = ("mechanism", "ground", "bodies", "joints", "drivers", "loads", "elements",
-            "initial")
-MECH_KEYS = ("name", "gravity")
-BODY_KEYS = ("mass", "inertia", "inertia_about", "centroid", "points", "guess")
-JOINT_KEYS = ("type", "connects", "axis", "angle", "limits", "restitution", "spring", "damper",
-              "friction")
-LAW_KEYS = {
-    "constant": ("value",),
-    "polynomial": ("coefficients",),
-    "harmonic": ("mean", "amplitude", "frequency", "phase"),
-    "table": ("times", "values"),
-    "motor": ("stall", "no_load_speed"),
-}
-LOAD_KEYS = ("joint", "body", "point", "direction", "frame", "law", "zone")
-ELEMENT_KEYS = ("connects", "stiffness", "rest", "damping", "preload")
-DRIVER_KEYS = {
-    "constant_speed": ("motion", "initial", "speed"),
-    "polynomial": ("motion", "coefficients"),
-    "harmonic": ("motion", "initial", "amplitude", "frequency", "phase"),
-    "table": ("motion", "times", "values"),
-}
+# Allowed keys and defaults come from the one description of the format (schema.SPEC).
+TOP_KEYS = tuple(SPEC)
+MECH_KEYS = keys_of("mechanism")
+BODY_KEYS = keys_of("bodies")
+JOINT_KEYS = keys_of("joints")
+LAW_KEYS = schema.LAW_KEYS
+LOAD_KEYS = tuple(k for k in keys_of("loads") if k not in
+                  {x for ks in LAW_KEYS.values() for x in ks})
+ELEMENT_KEYS = keys_of("elements")
+DRIVER_KEYS = {m: ("motion",) + ks for m, ks in schema.MOTION_KEYS.items()}
 
 
 class _Reader:
@@ -212,9 +203,9 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     r.keys("", data, TOP_KEYS)
     mech = r.keys("mechanism", r.sub("", data, "mechanism"), MECH_KEYS)
     name = r.string("mechanism", mech, "name", default=Path(source).stem if source else "mechanism")
-    gravity = r.vec("mechanism", mech, "gravity", 2, default=(0.0, -9.81))
+    gravity = r.vec("mechanism", mech, "gravity", 2, default=default("mechanism", "gravity"))
 
-    ground_t = r.keys("ground", r.sub("", data, "ground"), ("points",))
+    ground_t = r.keys("ground", r.sub("", data, "ground"), keys_of("ground"))
     ground = {}
     for k, v in r.sub("ground", ground_t, "points").items():
         ground[k] = r.vec("ground.points", {k: v}, k, 2)
@@ -225,7 +216,7 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     loads = [_load(r, k, v) for k, v in r.sub("", data, "loads").items()]
     elements = [_element(r, k, v) for k, v in r.sub("", data, "elements").items()]
 
-    ini = r.keys("initial", r.sub("", data, "initial"), ("joints", "velocities", "equilibrium"))
+    ini = r.keys("initial", r.sub("", data, "initial"), keys_of("initial"))
     eq: tuple[str, ...] | str = ()
     if "equilibrium" in ini:
         raw = ini["equilibrium"]
@@ -263,7 +254,7 @@ def _body(r: _Reader, name: str, d: Any) -> Body:
     d = r.keys(t, d, BODY_KEYS)
     mass = r.num(t, d, "mass")
     inertia = r.num(t, d, "inertia")
-    centroid = r.vec(t, d, "centroid", 2, default=(0.0, 0.0))
+    centroid = r.vec(t, d, "centroid", 2, default=default("bodies", "centroid"))
     pts_t = r.sub(t, d, "points")
     points = {k: r.vec(f"{t}.points", pts_t, k, 2) for k in pts_t}
     guess = r.vec(t, d, "guess", 3, default=None)
@@ -294,27 +285,31 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
         for k in ("axis", "angle"):
             if k in d:
                 r.bad(t, k, "only a prismatic joint has this key")
-    axis = r.vec(t, d, "axis", 2, default=(1.0, 0.0))
-    angle = r.num(t, d, "angle", default=0.0)
+    axis = r.vec(t, d, "axis", 2, default=default("joints", "axis"))
+    angle = r.num(t, d, "angle", default=default("joints", "angle"))
     limits = None
     if "limits" in d:
-        lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"), ("lower", "upper"))
+        lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"),
+                    keys_of("joints", "limits"))
         limits = Limits(r.num(f"{t}.limits", lt, "lower", None),
                         r.num(f"{t}.limits", lt, "upper", None))
-    restitution = r.num(t, d, "restitution", default=0.0)
+    restitution = r.num(t, d, "restitution", default=default("joints", "restitution"))
     if "restitution" in d and limits is None:
         r.bad(t, "restitution", "a restitution needs 'limits' to act on")
     spring = damper = None
     if "spring" in d:
-        st = r.keys(f"{t}.spring", r.sub(t, d, "spring"), ("stiffness", "rest"))
+        st = r.keys(f"{t}.spring", r.sub(t, d, "spring"),
+                    keys_of("joints", "spring"))
         spring = Spring(r.num(f"{t}.spring", st, "stiffness"),
-                        r.num(f"{t}.spring", st, "rest", 0.0))
+                        r.num(f"{t}.spring", st, "rest",
+                             default("joints", "rest", "spring")))
     if "damper" in d:
-        dt = r.keys(f"{t}.damper", r.sub(t, d, "damper"), ("damping",))
+        dt = r.keys(f"{t}.damper", r.sub(t, d, "damper"), keys_of("joints", "damper"))
         damper = Damper(r.num(f"{t}.damper", dt, "damping"))
     friction = None
     if "friction" in d:
-        ft = r.keys(f"{t}.friction", r.sub(t, d, "friction"), ("static", "kinetic"))
+        ft = r.keys(f"{t}.friction", r.sub(t, d, "friction"),
+                    keys_of("joints", "friction"))
         friction = Friction(r.num(f"{t}.friction", ft, "static"),
                             r.num(f"{t}.friction", ft, "kinetic"))
     return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper,
@@ -358,21 +353,22 @@ def _load(r: _Reader, name: str, d: Any) -> Load:
     law = _law(r, t, d)
     zone = None
     if "zone" in d:
-        zt = r.keys(f"{t}.zone", r.sub(t, d, "zone"), ("joint", "lower", "upper"))
+        zt = r.keys(f"{t}.zone", r.sub(t, d, "zone"), keys_of("loads", "zone"))
         zone = Zone(r.string(f"{t}.zone", zt, "joint", None),
                     r.num(f"{t}.zone", zt, "lower", None), r.num(f"{t}.zone", zt, "upper", None))
     return Load(name, law, joint=r.string(t, d, "joint", None), body=r.string(t, d, "body", None),
                 point=r.string(t, d, "point", None),
                 direction=r.vec(t, d, "direction", 2, default=None),
-                frame=r.string(t, d, "frame", "global"), zone=zone)
+                frame=r.string(t, d, "frame", default("loads", "frame")), zone=zone)
 
 
 def _element(r: _Reader, name: str, d: Any) -> Element:
     t = f"elements.{name}"
     d = r.keys(t, d, ELEMENT_KEYS)
     first, second = _connects(r, t, d)
-    return Element(name, first, second, r.num(t, d, "stiffness", 0.0), r.num(t, d, "rest", 0.0),
-                   r.num(t, d, "damping", 0.0), r.num(t, d, "preload", 0.0))
+    vals = [r.num(t, d, k, default("elements", k))
+            for k in ("stiffness", "rest", "damping", "preload")]
+    return Element(name, first, second, *vals)
 
 
 def _driver(r: _Reader, name: str, d: Any) -> Driver:

@@ -159,5 +159,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                         for n, b in mech.bodies.items()},
         "ground": {k: list(v) for k, v in mech.ground.items()},
         "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
+        # for drawings: guides of prismatic joints and the stops of metamorphic joints
+        "axes": {n: list(j.axis) for n, j in mech.joints.items() if j.type == "prismatic"},
+        "limits": {n: [j.limits.lower, j.limits.upper] for n, j in mech.joints.items()
+                   if j.limits is not None},
     }
     return Result(meta, data, configurations, events, stats, status, message)

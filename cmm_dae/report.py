@@ -21,6 +21,18 @@ if TYPE_CHECKING:  # pragma: no cover
     from .studies import WorkPrecision
 
 
+#: Relative level below which a series counts as round-off (against the largest series of
+#: its unit in the same comparison).
+NOISE = 1e-9
+NOISE_NOTE = (f"Relative errors are left out ('-') for series at round-off level (below "
+              f"{NOISE:g} of the largest series of the same unit): they are zero in exact "
+              "arithmetic.")
+ENERGY_NOTE = ("`E lost` is the kinetic energy lost at the event. It can be negative at a "
+               "plastic impact under a prescribed driver: the driver's impulse does work on "
+               "the mechanism at the impact, so the mechanism alone may gain energy even "
+               "though the collision itself dissipates.")
+
+
 @dataclass
 class SeriesDiff:
     """Difference of one series between two results on the common grid."""
@@ -30,10 +42,21 @@ class SeriesDiff:
     max_abs: float
     rms: float
     scale: float
+    #: Below this scale the series is round-off (it should be zero): no relative error.
+    floor: float = 0.0
+
+    @property
+    def meaningful(self) -> bool:
+        """Whether the series is above round-off, so that a relative error means something."""
+        return self.scale > self.floor
 
     @property
     def max_rel(self) -> float:
-        return self.max_abs / self.scale if self.scale > 0 else math.nan
+        """max |diff| / max |a|; NaN for a series at round-off level (see ``floor``)."""
+        return self.max_abs / self.scale if self.meaningful else math.nan
+
+    def rel_text(self) -> str:
+        return f"{self.max_rel:.2e}" if self.meaningful else "-"
 
 
 @dataclass
@@ -80,7 +103,9 @@ class Comparison:
                  f" {'rel':>9}"]
         for s in self.series:
             lines.append(f"{s.name + ' [' + s.unit + ']':<34} {s.max_abs:12.4g} {s.rms:12.4g} "
-                         f"{s.scale:12.4g} {s.max_rel:9.2e}")
+                         f"{s.scale:12.4g} {s.rel_text():>9}")
+        if not all(s.meaningful for s in self.series):
+            lines.append(NOISE_NOTE)
         lines.append("")
         lines.append(f"{'event':<28} {'t ' + la + ' [s]':>14} {'t ' + lb + ' [s]':>14} "
                      f"{'diff [s]':>11}")
@@ -97,8 +122,25 @@ class Comparison:
                          f"{len(r.events)} events, {r.t.size} samples")
         return "\n".join(lines)
 
-    def write_report(self, out: str | Path) -> Path:
-        """Write ``report.md`` and ``report.html`` with PNG figures into ``out``."""
+    def write_report(self, out: str | Path, *, animation: bool = True,
+                     frames: int = 80) -> Path:
+        """Write ``report.md`` and ``report.html`` with PNG figures into ``out``.
+
+        Parameters
+        ----------
+        out : str or Path
+            The folder (created if needed).
+        animation : bool
+            Put an interactive animation of run ``a`` (guide, stops, locked joints drawn)
+            into ``report.html``.
+        frames : int
+            Frames of that animation.
+
+        Returns
+        -------
+        Path
+            ``report.md``.
+        """
         from . import plots
 
         out = Path(out)
@@ -136,12 +178,21 @@ class Comparison:
                 md.append(f"| {row.method} | {row.setting} | {row.wall:.4g} | {err} |")
         if self.notes:
             md += ["", "## Notes", ""] + [f"- {n}" for n in self.notes]
-        md += ["", "## Event log", "", f"### {la}", "", "```", self.a.event_table(), "```", "",
-               f"### {lb}", "", "```", self.b.event_table(), "```", "", "## Figures", ""]
+        md += ["", "## Event log", "", ENERGY_NOTE, "", f"### {la}", "", "```",
+               self.a.event_table(), "```", "", f"### {lb}", "", "```", self.b.event_table(),
+               "```", "", "## Figures", ""]
         for title, path in figs.items():
             md += [f"### {title}", "", f"![{title}]({Path(path).name})", ""]
         (out / "report.md").write_text("\n".join(md))
-        (out / "report.html").write_text(_markdown_to_html(md, name))
+        page = _markdown_to_html(md, name)
+        if animation:
+            from .animation import html_animation
+
+            player = html_animation(self.a, max_frames=frames)
+            page = page.replace("\n</body>", f"\n<h2>Animation ({html.escape(la)})</h2>\n"
+                                f"<p>Locked metamorphic joints red, free ones green; the "
+                                f"guides and stops in grey.</p>\n{player}</body>", 1)
+        (out / "report.html").write_text(page)
         return out / "report.md"
 
 
@@ -187,6 +238,13 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         add(f"joint {name} force x", "N", ja.force[:, 0], jb.force[:, 0])
         add(f"joint {name} force y", "N", ja.force[:, 1], jb.force[:, 1])
         add(f"joint {name} torque", "N m", ja.torque, jb.torque)
+    # A series whose scale is round-off against the largest series of its unit (a revolute
+    # joint's torque, a force component along a frictionless guide) has no relative error.
+    top: dict[str, float] = {}
+    for sd in series:
+        top[sd.unit] = max(top.get(sd.unit, 0.0), sd.scale)
+    for sd in series:
+        sd.floor = max(NOISE * top[sd.unit], 1e-300)
     return Comparison(a, b, t, mask, series, match_events(a, b))
 
 

@@ -6,9 +6,7 @@ algorithm fill the same object, so every report, plot and check works for both.
 
 from __future__ import annotations
 
-import csv
-import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -330,6 +328,9 @@ class Result:
                          f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
         if not self.events:
             lines.append("(no events)")
+        if any(e.energy_lost < 0 for e in self.events) and self.meta.get("drivers"):
+            lines.append("(E lost < 0: the driver's impulse does work at the impact, so the "
+                         "mechanism can gain kinetic energy there)")
         return "\n".join(lines)
 
     def _config_text(self, i: int) -> str:
@@ -337,49 +338,27 @@ class Result:
 
     # ------------------------------------------------------------------ export
     def columns(self) -> dict[str, np.ndarray]:
-        """Every series as named columns (SI units in the names)."""
-        cols: dict[str, np.ndarray] = {"t [s]": self.t, "configuration": self.configuration}
-        for name, typ in zip(self.meta["joints"], self.meta["joint_types"], strict=True):
-            u = "rad" if typ == "revolute" else "m"
-            js = self.joint(name)
-            cols[f"joint {name} position [{u}]"] = js.position
-            cols[f"joint {name} velocity [{u}/s]"] = js.velocity
-            cols[f"joint {name} acceleration [{u}/s^2]"] = js.acceleration
-            cols[f"joint {name} force x [N]"] = js.force[:, 0]
-            cols[f"joint {name} force y [N]"] = js.force[:, 1]
-            cols[f"joint {name} torque [N m]"] = js.torque
-        for name in self.meta["drivers"]:
-            u = "N m" if self.meta["joint_types"][self.meta["joints"].index(name)] == "revolute" \
-                else "N"
-            cols[f"driver {name} effort [{u}]"] = self.driver(name).effort
-        for name in self.meta["bodies"]:
-            b = self.body(name)
-            for k, lab in enumerate(("x [m]", "y [m]", "theta [rad]")):
-                cols[f"body {name} {lab}"] = b.pose[:, k]
-        return cols
+        """Every series as named columns (SI units in the names); see :mod:`cmm_dae.export`."""
+        from .export import columns
+
+        return columns(self)
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write every series to a CSV file (one row per sample)."""
-        path = Path(path)
-        cols = self.columns()
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(list(cols))
-            for row in zip(*cols.values(), strict=True):
-                w.writerow([repr(float(x)) for x in row])
-        return path
+        """Write every series to a CSV file (one row per sample, a header naming each column
+        with its unit, the configuration by its description)."""
+        from .export import to_csv
+
+        return to_csv(self, path)
+
+    def to_dataframe(self) -> Any:
+        """Every series as a :class:`pandas.DataFrame` (needs pandas: ``pip install
+        'cmm_dae[dataframe]'``), one row per sample, columns named with their units."""
+        from .export import to_dataframe
+
+        return to_dataframe(self)
 
     def save(self, path: str | Path) -> Path:
         """Save the whole Result (arrays, configurations, events, stats) to an ``.npz`` file."""
-        path = Path(path)
-        meta = dict(self.meta)
-        meta["configurations"] = [asdict(c) for c in self.configurations]
-        meta["events"] = [asdict(e) for e in self.events]
-        meta["stats"] = asdict(self.stats)
-        meta["status"] = str(self.status)
-        meta["message"] = self.message
-        with path.open("wb") as f:
-            np.savez_compressed(f, __meta__=np.array(json.dumps(meta)), **self.data)
-        return path
+        from .export import save
 
-
+        return save(self, path)

@@ -11,6 +11,7 @@ end time or to the next trigger.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Any
@@ -27,6 +28,7 @@ from .integrator import Integrator, Recorder, RunOptions
 from .iterative import IterativeIntegrator
 from .mechanism import Mechanism
 from .post import build_result
+from .progress import Bar
 from .result import Result, Stats
 from .structure import force_constraint_joints, labeller
 
@@ -120,7 +122,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
              rtol: float = 1e-8, atol: float = 1e-10, output_dt: float | None = 0.01,
              dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
              v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
-             model: Model | None = None) -> Result:
+             model: Model | None = None, progress: bool = False) -> Result:
     """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
 
     Parameters
@@ -153,6 +155,8 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         ``status`` and ``message`` saying what happened (False).
     model : Model or None
         A prebuilt model of ``mech`` (saves the CasADi build).
+    progress : bool
+        Draw a progress bar of the simulated time on stderr.
 
     Returns
     -------
@@ -170,8 +174,15 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
                          output_every=output_every, max_events=max_events, v_lock=v_lock,
                          max_steps=max_steps)
-    with _one_blas_thread():
-        return _run(mech, opts, METHODS[method], throw, model)
+    bar = Bar(opts.t_end, f"{mech.name} ({method})", "s", enabled=progress)
+    opts = dataclasses.replace(opts, progress=bar)
+    try:
+        with _one_blas_thread():
+            res = _run(mech, opts, METHODS[method], throw, model)
+        bar.update(float(res.t[-1]))
+        return res
+    finally:
+        bar.close()
 
 
 def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
@@ -248,22 +259,22 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,
             output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
             max_steps: int | None = None, throw: bool = True,
-            model: Model | None = None) -> Result:
+            model: Model | None = None, progress: bool = False) -> Result:
     """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
     return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                     max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
-                    model=model)
+                    model=model, progress=progress)
 
 
 def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
                   output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
                   max_steps: int | None = None, throw: bool = True,
-                  model: Model | None = None) -> Result:
+                  model: Model | None = None, progress: bool = False) -> Result:
     """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
     ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
     return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
                     v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
-                    model=model)
+                    model=model, progress=progress)
 
 
 __all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate"]

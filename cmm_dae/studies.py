@@ -139,7 +139,7 @@ class WorkPrecision:
 
 def work_precision(mech: Mechanism, *, t_end: float = 10.0,
                    rtols: tuple[float, ...] = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
-                   dts: tuple[float, ...] = (1e-2, 5e-3, 2.5e-3, 1e-3),
+                   dts: tuple[float, ...] = (1e-2, 5e-3, 2.5e-3),
                    ref_rtol: float = 1e-12, driver: str | None = None,
                    model: Model | None = None) -> WorkPrecision:
     """Error in the driving effort against wall time, IDA over ``rtols`` and the iterative

@@ -24,6 +24,7 @@ import numpy as np
 from .errors import CmmError, ModelError, Problem
 from .mechanism import Mechanism
 from .params import with_params
+from .progress import Bar
 from .result import Result
 
 Metric = Callable[[Result], Mapping[str, float]]
@@ -210,23 +211,6 @@ class _Checkpoint:
             w.writerow(row)
 
 
-class _Progress:
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.enabled, self.done, self.t0 = total, enabled, 0, time.perf_counter()
-
-    def step(self) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        frac = self.done / max(self.total, 1)
-        bar = "#" * int(30 * frac)
-        rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
-        sys.stderr.write(f"\rsweep [{bar:<30}] {self.done}/{self.total} ({rate:.1f} runs/s)")
-        if self.done == self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[str, float]],
           *, t_end: float, metrics: Metric | None = None, client: Any = None,
           workers: int | None = None, checkpoint: str | Path | None = None,
@@ -274,13 +258,13 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
             todo.append(i)
     ck = _Checkpoint(ck_path)
     show = progress if progress is not None else (len(todo) >= 20 and sys.stderr.isatty())
-    bar = _Progress(len(todo), show)
+    bar = Bar(len(todo), "sweep", "runs", enabled=show, every=0.0)
 
     def finish(i: int, row: dict[str, Any]) -> None:
         row = {"case": i, **row}
         rows[i] = row
         ck.write(row)
-        bar.step()
+        bar.update(bar.value + 1)
 
     if client is not None:
         from distributed import as_completed
@@ -302,6 +286,7 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
                     fin, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for fut in fin:
                         finish(pending.pop(fut), fut.result())
+    bar.close()
     return SweepTable([r for r in rows if r is not None])
 
 
