@@ -171,7 +171,16 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
     (none when the trigger is rejected or the joint stays locked)."""
     if tr.kind == "zone":
         done = zone_switch(hs, tr.joint, q, v, t)
-        return [done] if done is not None else []
+        if done is None:
+            return []
+        # The load switched on or off at once: a joint held on its stop (or stuck) may no
+        # longer be held from this very instant. Its event function jumped below zero
+        # rather than crossing it, so no root finder would report it: check here.
+        out = [done]
+        for nxt in crossings(hs, done.q, done.v, t):
+            if nxt.kind in ("push", "slip"):
+                out += handle(hs, nxt, done.q, done.v, t, policy)
+        return out
     if not confirm(hs, tr, q, v, t, policy):
         return []
     if tr.kind == "gap":

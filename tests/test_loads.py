@@ -300,3 +300,46 @@ def test_callable_law_errors():
     with pytest.raises(cd.SolverError, match=r"the law of load 'hand' returned nan") as info:
         cd.run_dae(bad, 1.0)
     assert info.value.status is cd.Status.NUMERICAL and 0.4 < info.value.result.t[-1] <= 0.5
+
+
+def test_load_switched_on_by_a_zone_releases_a_held_joint_at_once():
+    """A slider-crank press whose tool is preloaded onto its stop by a spring (10 N) and
+    whose cutting load (30 N) switches on in a zone of the carriage: the tool must leave
+    its stop at the zone's edge (the lock force's event function jumps below zero there, it
+    does not cross it). Reference: the tool's own equation of motion relative to the
+    prescribed carriage (minimal coordinate, scipy at rtol 1e-12) until it hits the lower
+    stop."""
+    mech = cd.load(Path(__file__).parent / "models" / "overload_press.toml")
+    res = cd.run_dae(mech, 0.45, rtol=1e-11, atol=1e-13)
+    kinds = [(e.kind, e.joint, e.side) for e in res.events]
+    assert kinds[1:4] == [("zone", "rail", "enter"), ("release", "T", "upper"),
+                          ("limit", "T", "lower")]
+    t0, t_hit, v_hit = res.events[1].t, res.events[3].t, res.events[3].velocity_before
+    assert res.events[2].t == t0
+
+    w, r, ell = 2 * np.pi, 0.05, 0.2
+
+    def x_carriage_acc(t):
+        th = np.pi + w * t
+        s2 = (r * np.sin(th)) ** 2
+        root = np.sqrt(ell**2 - s2)
+        # d2/dt2 of r cos(th) + sqrt(l^2 - r^2 sin^2 th)
+        d1 = -r**2 * np.sin(th) * np.cos(th) * w / root
+        d2 = -r**2 * np.cos(2 * th) * w**2 / root - d1**2 / root
+        return -r * np.cos(th) * w**2 + d2
+
+    def rhs(t, y):
+        s, sd = y
+        force = -30.0 + 1000.0 * (0.01 - s) + 2.0  # load, spring, kinetic friction (s' < 0)
+        return [sd, force / 0.3 - x_carriage_acc(t)]
+
+    hit = lambda t, y: y[0] + 0.03  # noqa: E731
+    hit.terminal, hit.direction = True, -1
+    ref = solve_ivp(rhs, (t0, 1.0), [0.0, 0.0], events=hit, rtol=1e-12, atol=1e-14,
+                    method="DOP853")
+    assert abs(t_hit - ref.t_events[0][0]) < 1e-8
+    assert abs(v_hit - ref.y_events[0][0][1]) < 1e-7 * abs(v_hit)
+    # the iterative algorithm releases at the end of the step that enters the zone
+    it = cd.run_iterative(mech, 0.45, dt=1e-3)
+    zone = next(e for e in it.events if e.kind == "zone")
+    assert next(e for e in it.events if e.kind == "release").t == zone.t
