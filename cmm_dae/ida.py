@@ -34,6 +34,8 @@ from .result import Stats
 #: was the most robust value over the shipped models and rtol 1e-6 .. 1e-12.
 ATOL_LAMBDA = 1e-2
 ATOL_MU = 1e3
+#: The multipliers' absolute tolerance once a singular position has been crossed.
+ATOL_LAMBDA_SINGULAR = 1e3
 
 
 def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
@@ -75,6 +77,7 @@ class IdaIntegrator(Integrator):
         self.ev_out = np.zeros(0)
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
+        self.relaxed = False  # multipliers still in the error test
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
         # jump in the prescribed acceleration, so the run restarts there.
         self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
@@ -146,6 +149,19 @@ class IdaIntegrator(Integrator):
             # A first step long enough that round-off in the gap cannot read as a crossing.
             self.first_step = min(1e-6, 1e3 * np.finfo(float).eps * (1 + abs(c))
                                   / max(abs(last.velocity_after), 1e-300))
+
+    def after_singular(self, t: float) -> None:
+        # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
+        # restart (order 1, small steps) fails on their error test alone.
+        self.relax_multipliers()
+
+    def relax_multipliers(self) -> None:
+        """Leave the multipliers out of IDA's error test from now on, as index-2 variables
+        usually are (the outputs' forces come from a KKT solve anyway; only the step
+        control used them: they are kept in it by default because it makes runs with
+        stops take fewer steps)."""
+        self.relaxed = True
+        self.atol[2 * self.model.nq:2 * self.model.nq + self.model.m] = ATOL_LAMBDA_SINGULAR
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
         model, opts, hs = self.model, self.opts, self.hs
@@ -235,6 +251,12 @@ class IdaIntegrator(Integrator):
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
         T, Y = np.asarray(r.t), np.asarray(r.y)
+        if r.status < 0 and self.error is None and T[-1] <= t0 and not self.relaxed:
+            # IDA could not take a first step: large or near-singular constraint sets (long
+            # chains, just past a singular position) fail on the multipliers' error test
+            # alone. Leave them out of it from here on and start the segment again.
+            self.relax_multipliers()
+            return self.advance(t0, q, v, rec)
         keep = np.arange(1, T.size)
         if extra is not None:
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
@@ -248,7 +270,12 @@ class IdaIntegrator(Integrator):
                               f"{self.t_error:.9g} s: "
                               f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
         if r.status < 0:
+            self.v_fail = v1
             message, status = self._failure(r, t1, q1)
+            if status is Status.DEAD_POINT and t1 > t0:
+                # the constraints collapse ahead: let the policy try to cross (a singular
+                # position on the motion's branch), which says "dead point" if it cannot
+                return SegmentEnd(t1, q1, v1, (), "singular")
             raise SolverError(message, status=status)
         if r.status == 2 and self.stalled:
             raise SolverError(
@@ -266,13 +293,20 @@ class IdaIntegrator(Integrator):
             return SegmentEnd(t1, q1, v1, (), "restart")
         return SegmentEnd(t1, q1, v1, (), "end")
 
+    def _ratio_falls(self, q: np.ndarray, tt: float, ratio: float) -> bool:
+        """Whether the constraints' singular-value ratio falls along the motion at the
+        failure (a singular position ahead, not only a badly conditioned stretch)."""
+        v = self.v_fail
+        h = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
+        return ev.dependent_rows(self.model, q + v * h, tt + h, self.p, tol=1.0)[1] < ratio
+
     def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status]:
         cfg = self.hs.configurations[self.hs.current()].label
         # the constraint rows' conditioning at the failure against the segment's start: a
         # dead point shows as a collapse of the smallest singular value (units mix, so
         # only the ratio of the two says anything)
         labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
-        if ratio < 0.2 * self.ratio0:
+        if ratio < 0.2 * self.ratio0 or (ratio < 0.05 and self._ratio_falls(q, tt, ratio)):
             what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")

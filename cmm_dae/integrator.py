@@ -48,16 +48,17 @@ class SegmentEnd:
         State there (positions m/rad, velocities m/s, rad/s).
     triggers : tuple of Trigger
         What was detected at t (several at one instant are all listed), empty otherwise.
-    reason : {"end", "event", "restart"}
+    reason : {"end", "event", "restart", "singular"}
         Reached ``t_end``; stopped at triggers; or stopped for a restart with nothing to
-        switch (a driver breakpoint, or a state to re-initialise from).
+        switch (a driver breakpoint, or a state to re-initialise from); or stopped at the
+        last good state before a singular position (the constraints collapse ahead).
     """
 
     t: float
     q: np.ndarray
     v: np.ndarray
     triggers: tuple[Trigger, ...] = ()
-    reason: Literal["end", "event", "restart"] = "end"
+    reason: Literal["end", "event", "restart", "singular"] = "end"
 
 
 class Recorder:
@@ -112,6 +113,9 @@ class Integrator(ABC):
         ``t_end`` or the next trigger, adding output samples to ``rec`` (a sample at the
         trigger's time, before any switch, included); raise :class:`SolverError` with a
         status on failure."""
+
+    def after_singular(self, t: float) -> None:  # noqa: B027
+        """The run goes on from time ``t`` after a singular position was crossed."""
 
     def after_events(self, transitions: list[Transition]) -> None:  # noqa: B027
         """Told what the policy did at the last stop (default: nothing to adjust)."""

@@ -115,6 +115,10 @@ class IterativeIntegrator(Integrator):
         self.key: tuple | None = None
         self.st: _Stepper | None = None
 
+    def after_singular(self, t: float) -> None:
+        # go on from the grid point before t: the next step ends on the grid again
+        self.n = max(self.n, int(np.floor(t / self.opts.dt + 1e-9)))
+
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
         model, hs, opts = self.model, self.hs, self.opts
         key = tuple(sorted(hs.locked.items()))
@@ -134,7 +138,14 @@ class IterativeIntegrator(Integrator):
             cdd = model.joint_accelerations(q, v, a, t)
             targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
             rates = cd[k] + cdd[k] * h
-            q = st.positions(q + v * h, t_new, targets)
+            try:
+                q_new = st.positions(q + v * h, t_new, targets)
+            except SolverError as e:
+                if e.status is not Status.DEAD_POINT:
+                    raise
+                self.n -= 1  # the step is not taken: the policy crosses from (t, q, v)
+                return SegmentEnd(t, q, v, (), "singular")
+            q = q_new
             v = st.velocities(q, t_new, rates)
             t = t_new
             self.stats.steps += 1

@@ -66,7 +66,8 @@ class Event:
         ``"limit"`` (reached a limit and locked), ``"bounce"`` (reached it and rebounded),
         ``"lock"`` (locked without impact), ``"release"``, ``"zone"`` (a load's zone
         entered or left), ``"stick"`` and ``"slip"`` (dry friction; ``side`` "stick",
-        "positive" or "negative", the force at the switch in ``release_force``).
+        "positive" or "negative", the force at the switch in ``release_force``),
+        ``"singular"`` (a singular position crossed on the branch of the motion).
     joint : str
         The metamorphic joint (for a zone: the joint whose coordinate defines it).
     side : str
@@ -83,6 +84,12 @@ class Event:
         Lock force/torque at a release (the value whose sign change released it), N or N m.
     load : str
         For a zone event, the load whose zone it is.
+    note : str
+        For a ``"singular"`` event (a singular position crossed: the constraints dependent
+        for an instant, ``side`` the branch rule, ``"continue"``): the dependent
+        constraints, the rank drop and the continuity of the velocities. Its
+        ``velocity_before``/``after`` are the norms of the body velocities where the
+        crossing began and ended, and ``joint`` the first joint among the dependent ones.
     """
 
     t: float
@@ -97,6 +104,7 @@ class Event:
     energy_lost: float = 0.0
     release_force: float = 0.0
     load: str = ""
+    note: str = ""
 
 
 @dataclass
@@ -328,6 +336,8 @@ class Result:
                          f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
         if not self.events:
             lines.append("(no events)")
+        lines += [f"(singular at t = {e.t:.9f} s: {e.note})" for e in self.events
+                  if e.kind == "singular"]
         # a negative loss beyond round-off (a stick's vanishing impulse leaves ~1e-16 J)
         if any(e.energy_lost < -1e-9 for e in self.events) and self.meta.get("drivers"):
             lines.append("(E lost < 0: the driver's impulse does work at the impact, so the "

@@ -29,7 +29,8 @@ from .iterative import IterativeIntegrator
 from .mechanism import Mechanism
 from .post import build_result
 from .progress import Bar
-from .result import Result, Stats
+from .result import Event, Result, Stats
+from .singular import step_over
 from .structure import force_constraint_joints, labeller
 
 #: The integration methods, by name.
@@ -235,6 +236,11 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                                           f"{t:.9g} s (last: {e.kind} of joint {e.joint})",
                                           status=Status.MAX_EVENTS)
                 integ.after_events(done)
+            if end.reason == "singular":
+                t, q, v = _cross_singular(hs, integ, t, q, v, opts, rec, events, after)
+                if t >= opts.t_end * (1.0 - 1e-12):
+                    break
+                continue
             if end.reason == "end":
                 break
     except KeyboardInterrupt as e:
@@ -254,6 +260,31 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                           configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err
     return res
+
+
+def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
+                    v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
+                    after: list[int]) -> tuple[float, np.ndarray, np.ndarray]:
+    """Cross the singular position ahead of (t, q, v): the state after it, one sample
+    there and a "singular" event at the singular instant."""
+    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end)
+    cfg = hs.current()
+    ke = 0.5 * float(np.sum(hs.model.mass * v**2))
+    ke1 = 0.5 * float(np.sum(hs.model.mass * cr.v**2))
+    note = (f"constraints of {', '.join(cr.labels)} dependent for an instant (rank drop "
+            f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
+            f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
+    joint = next((lab.split(" ", 1)[1] for lab in cr.labels if lab.startswith("joint ")), "")
+    events.append(Event(cr.t_singular, "singular", joint, "continue", cfg, cfg,
+                        float(np.linalg.norm(v)), float(np.linalg.norm(cr.v)), {},
+                        ke - ke1, 0.0, "", note))
+    rec.add(cr.t_after, cr.q, cr.v, cfg)
+    after.append(len(rec) - 1)
+    integ.after_singular(cr.t_after)
+    if len(events) > opts.max_events:
+        raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
+                          "a singular position)", status=Status.MAX_EVENTS)
+    return cr.t_after, cr.q, cr.v
 
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,

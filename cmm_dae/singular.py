@@ -1,0 +1,212 @@
+"""Passing singular positions: where the constraint Jacobian loses rank for an instant.
+
+At a singular position of a closed loop (a parallelogram four-bar with all its links on one
+line, where it meets its anti-parallelogram branch) the constraint rows become dependent
+for an instant: the mobility jumps, the KKT matrix is singular, and neither IDA's Newton
+iteration nor the position equations of the fixed-step algorithm converge. The motion
+itself is smooth there: in minimal coordinates it is an ordinary ODE, and the branch the
+mechanism is on continues with its velocity.
+
+Both integrators stop just before such a position (IDA fails to converge; the fixed-step
+algorithm's Newton solve fails) and hand over their last good state. :func:`step_over`
+then
+
+1. locates the singular instant along the motion (the minimum of the smallest-to-largest
+   singular value ratio of the active constraint rows, the ratio falling linearly to it);
+2. crosses it with steps of the two-stage Gauss-Legendre method (order 4) on the
+   accelerations of the KKT system. Gauss nodes lie inside each step, never at its ends,
+   and the singular instant is a step boundary, so the accelerations are never asked for
+   where they are undetermined;
+3. projects positions and velocities back onto the constraints (minimum-norm corrections)
+   and checks that the motion went on continuously: velocities that the projection has to
+   change by more than round-off, or a position still singular, mean that the mechanism
+   cannot go on (a dead point of its drivers, a lock-up), and that is still an error.
+
+The event logged is of kind ``"singular"``, with the joints whose constraints became
+dependent, the rank drop and the branch taken (``side = "continue"``: the branch of the
+motion, by continuity of velocity).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .equations import Model
+from .errors import SolverError, Status
+from .kinematics import dependent_rows
+
+#: Gauss-Legendre, two stages (order 4): nodes and coefficients.
+_S3 = math.sqrt(3.0) / 6.0
+_C = np.array([0.5 - _S3, 0.5 + _S3])
+_A = np.array([[0.25, 0.25 - _S3], [0.25 + _S3, 0.25]])
+_B = np.array([0.5, 0.5])
+
+
+#: Gauss steps from the last good state to the singular instant.
+SUBSTEPS = 2
+#: The crossing ends where the singular-value ratio is this many times the one at its start.
+AFTER = 12.0
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """A singular position crossed: where, how, and the state after it."""
+
+    t_singular: float
+    t_after: float
+    q: np.ndarray
+    v: np.ndarray
+    labels: list[str]
+    rank_drop: int
+    ratio_min: float
+    velocity_jump: float
+
+
+def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
+    J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
+    s = np.linalg.svd(J, compute_uv=False)
+    if J.shape[0] > J.shape[1]:
+        return 0.0
+    return float(s[-1] / s[0]) if s.size and s[0] > 0 else 1.0
+
+
+def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+              h: float, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One two-stage Gauss-Legendre step of q' = v, v' = a(t, q, v).
+
+    The accelerations are taken at the stage states projected onto the constraints: off
+    them, near a singular position, the KKT accelerations are so sensitive to the
+    constraint violation that a plain fixed-point iteration of the stages diverges. The
+    iteration stops when the stage accelerations no longer change beyond their round-off
+    (which the near-singular solve amplifies to about 1e-9 of their size). ``guess``
+    predicts the stage accelerations (never the acceleration at the step's start, which
+    may be the singular instant itself, where it is undetermined); returns q, v and the
+    last stage's acceleration (the next step's guess)."""
+    def acc(tt, qq, vv):
+        q1, v1, _ = _project(model, p, qq, vv, tt)
+        return model.kkt(q1, v1, tt, p)[0]
+
+    K = np.array([guess, guess])  # stage accelerations
+    scale = 1.0 + float(np.max(np.abs(guess)))
+    for _ in range(12):
+        V = v + h * (_A @ K)
+        Qs = q + h * (_A @ V)
+        Kn = np.array([acc(t + _C[i] * h, Qs[i], V[i]) for i in range(2)])
+        change = float(np.max(np.abs(Kn - K)))
+        K = Kn
+        if change <= 1e-8 * scale:
+            break
+        if not change < 1e3 * scale:
+            raise np.linalg.LinAlgError("the Gauss stages diverge")
+    V = v + h * (_A @ K)
+    return q + h * (_B @ V), v + h * (_B @ K), K[1]
+
+
+def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
+             ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Minimum-norm corrections onto Phi = 0 and Phi_q v + Phi_t = 0; the position change."""
+    act = model.active_rows(p)
+    q1 = q.copy()
+    for _ in range(20):
+        con = model.constraints(q1, t, p)
+        r = con.phi[act]
+        if np.max(np.abs(r), initial=0.0) < 1e-14:
+            break
+        q1 = q1 - np.linalg.lstsq(con.Phi_q[act], r, rcond=None)[0]
+    con = model.constraints(q1, t, p)
+    J = con.Phi_q[act]
+    r = J @ v + con.Phi_t[act]
+    v1 = v - np.linalg.lstsq(J, r, rcond=None)[0]
+    return q1, v1, float(np.max(np.abs(q1 - q), initial=0.0))
+
+
+def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+              t_end: float) -> Crossing:
+    """Cross the singular position ahead of the state (t, q, v) on the branch of the motion.
+
+    Parameters
+    ----------
+    model, p : Model, ndarray
+        The equations and the configuration's parameters.
+    t : float
+        Time of the last good state, s.
+    q, v : ndarray
+        That state (positions, velocities).
+    t_end : float
+        End of the run, s (the crossing does not go beyond it).
+
+    Returns
+    -------
+    Crossing
+
+    Raises
+    ------
+    SolverError
+        With status ``dead point`` when no singular position lies ahead or the motion cannot
+        continue through it.
+    """
+    labels, r0 = dependent_rows(model, q, t, p, tol=1.0)
+    a0 = model.kkt(q, v, t, p)[0]
+    vnorm = float(np.max(np.abs(v), initial=0.0))
+
+    def path(tau: float) -> np.ndarray:  # the motion ahead, to second order
+        return q + v * tau + 0.5 * a0 * tau * tau
+
+    def dead(why: str) -> SolverError:
+        return SolverError(f"dead point at t = {t:.9g} s: the constraints of "
+                           f"{', '.join(labels) or 'the mechanism'} become dependent "
+                           f"(singular-value ratio {r0:.1e}) and {why}",
+                           status=Status.DEAD_POINT)
+
+    if vnorm == 0.0:
+        raise dead("the mechanism is at rest there")
+    # the ratio falls about linearly to the singular instant: its rate gives the scale
+    probe = 1e-6 / max(vnorm, 1e-300)
+    rate = (_ratio(model, path(probe), t + probe, p) - r0) / probe
+    if not rate < 0.0:
+        raise dead("the motion does not approach a singular position: it cannot go on")
+    tau_lin = r0 / -rate
+    opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
+                          bounds=(0.0, 3.0 * tau_lin), method="bounded",
+                          options={"xatol": 1e-6 * tau_lin})
+    tau = float(opt.x)
+    r_min = float(opt.fun)
+    if not 0.0 < tau < 2.9 * tau_lin:
+        raise dead("no singular instant was found ahead")
+    t_s = t + tau
+    # Gauss steps of tau / SUBSTEPS: the singular instant is a step end; then on until the
+    # constraints are as well conditioned as where the integrator stopped, AFTER times over
+    # (it stopped because they were not well conditioned enough for it)
+    h = tau / SUBSTEPS
+    qq, vv, tt, guess = q, v, t, a0
+    try:
+        for k in range(SUBSTEPS * 20):
+            if tt + h > t_end:
+                h = t_end - tt
+            qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
+            tt += h
+            if tt >= t_end or (k >= SUBSTEPS and _ratio(model, qq, tt, p) >= AFTER * r0):
+                break
+    except np.linalg.LinAlgError as e:
+        raise dead(f"the motion cannot be continued through it ({e})") from None
+    q1, v1, dq = _project(model, p, qq, vv, tt)
+    act = model.active_rows(p)
+    closes = float(np.max(np.abs(model.constraints(q1, tt, p).phi[act]), initial=0.0))
+    jump = float(np.max(np.abs(v1 - vv), initial=0.0)) / vnorm
+    r1 = _ratio(model, q1, tt, p)
+    scale = max(float(np.max(np.abs(q1), initial=0.0)), 1.0)
+    if closes > 1e-10 * scale:
+        raise dead(f"beyond it the constraints cannot be satisfied (residual {closes:.1e}): "
+                   "the mechanism cannot follow its drivers through this position")
+    if jump > 1e-5 or dq > 1e-6 * scale or (tt < t_end and r1 < r0):
+        raise dead(f"the motion cannot continue through it (velocity change "
+                   f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
+    # the rank drop: the singular values that collapse at the singular instant
+    J = model.constraints(path(tau), t_s, p).Phi_q[model.active_rows(p)]
+    s = np.linalg.svd(J, compute_uv=False)
+    drop = int(np.sum(s < 0.1 * r0 * s[0])) if s.size else 0
+    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump)

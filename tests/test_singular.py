@@ -1,0 +1,98 @@
+"""Singular positions passed, not stopped at: the IFToMM A02 parallelogram chains (where
+all rods line up and the mobility jumps from 1 to N + 1) against their one-DOF reduction on
+the parallelogram branch, a change-point four-bar driven through its change point, and a
+real dead point still refused."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+from cmm_dae import iftomm
+
+from refs import short_coupler_four_bar
+
+
+@pytest.mark.parametrize("n", [1, 10])
+def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
+    res = cd.run_dae(iftomm.a02_four_bar(n), 1.3, rtol=1e-10, atol=1e-12)
+    sing = [e for e in res.events if e.kind == "singular"]
+    # the cranks pass the horizontal twice in 1.3 s (0.708 s and 1.215 s for N = 1)
+    assert len(sing) == 2 and all(e.side == "continue" for e in sing)
+    assert f"rank drop {n}," in sing[0].note
+    ref = iftomm.a02_reference(n, res.t)
+    err = np.max(np.hypot(*(iftomm.crank_tip(res) - ref).T))
+    assert err <= 1e-8  # measured 4.8e-9 (N = 1), 1.2e-9 (N = 10) m
+    # the singular instants: where the reference crank angle passes 0 and -pi
+    fine = np.linspace(0.0, 1.3, 130001)
+    ang = np.unwrap(np.arctan2(*iftomm.a02_reference(n, fine).T[::-1]))
+    for e, target in zip(sing, (0.0, -math.pi), strict=True):
+        t_ref = fine[np.argmin(np.abs(ang - target))]
+        assert abs(e.t - t_ref) <= 2e-5  # the reference grid is 1e-5 s
+    # energy is conserved through the crossings
+    e = res.energy()
+    total = e.kinetic + e.potential
+    assert np.max(np.abs(total - total[0])) <= 1e-8 * abs(iftomm.a02_energy(n))
+    # and the run stays on the constraints
+    assert res.drift[0] <= 1e-9
+
+
+def test_change_point_four_bar_is_driven_through_its_change_point(tmp_path):
+    """s + l = p + q: at the change point all four links lie on one line; the driven
+    crank goes on and the linkage follows on the branch of its motion."""
+    mech = short_coupler_four_bar(tmp_path, 0.15)
+    res = cd.run_dae(mech, 1.0, rtol=1e-10, atol=1e-12)
+    sing = [e for e in res.events if e.kind == "singular"]
+    assert res.success and len(sing) == 1
+    jump = float(re.search(r"velocities continuous to ([0-9.e+-]+)", sing[0].note).group(1))
+    assert jump <= 1e-6  # the projection after the crossing hardly changed the velocities
+    i = int(np.searchsorted(res.t, sing[0].t))
+    # every joint moves on continuously: no jump in any joint rate across the crossing
+    for j in mech.joints:
+        rate = res.joint(j).velocity
+        assert abs(rate[i + 1] - rate[i - 1]) <= 0.05 * (np.max(np.abs(rate)) + 1e-12)
+    assert res.drift[0] <= 1e-9 and res.drift[1] <= 1e-6
+
+
+def test_a_real_dead_point_is_still_an_error(tmp_path):
+    mech = short_coupler_four_bar(tmp_path, 0.16)  # its crank cannot turn fully
+    with pytest.raises(cd.SolverError, match="dead point") as info:
+        cd.run_dae(mech, 1.0, rtol=1e-8)
+    assert info.value.status == cd.Status.DEAD_POINT
+    assert 0.2 < info.value.result.t[-1] < 0.22
+    assert not [e for e in info.value.result.events if e.kind == "singular"]
+
+
+def test_iterative_algorithm_follows_the_branch_at_first_order():
+    """The fixed-step algorithm steps over the singular positions with its first-order
+    step; it stays on the parallelogram branch and its error falls with the step."""
+    mech = iftomm.a02_four_bar(1)
+    errs = []
+    for dt in (1e-3, 1e-4):
+        res = cd.run_iterative(mech, 2.0, dt=dt)
+        errs.append(np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(
+            1, res.t)).T)))
+    # measured 3.9e-2 and 3.9e-3 m: first order (the other branch would be off by ~1 m)
+    assert errs[0] < 0.05 and 8.0 < errs[0] / errs[1] < 12.0
+
+
+def test_singular_event_survives_save_and_load(tmp_path):
+    res = cd.run_dae(cd.load(cd.example("iftomm_a02_four_bar_N1")), 0.8, rtol=1e-10,
+                     atol=1e-12)
+    back = cd.load_result(res.save(tmp_path / "a02.npz"))
+    assert [e.note for e in back.events] == [e.note for e in res.events]
+    assert back.events[0].kind == "singular" and "rank drop 1" in back.events[0].note
+    assert "singular" in res.event_table()
+
+
+def test_shipped_a02_file_is_the_builder_mechanism():
+    built = iftomm.a02_four_bar(1)
+    shipped = cd.load(cd.example("iftomm_a02_four_bar_N1"))
+    assert shipped.bodies == built.bodies and shipped.joints == built.joints
+    assert shipped.ground == built.ground and shipped.initial == built.initial
+    a01 = cd.load(cd.example("iftomm_a01_pendulum"))
+    assert a01.bodies["bob"].inertia == 0.0 and a01.bodies["bob"].centroid == (1.0, 0.0)
