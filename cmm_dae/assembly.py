@@ -15,6 +15,7 @@ from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
 from .events import stick_or_slip
 from .hybrid import HybridState
+from .kinematics import redundant_rows
 from .result import Event
 from .zones import initial_zones
 
@@ -62,14 +63,18 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
     kidx = [model.jidx[n] for n in names]
     vals = np.array([known[n] for n in names])
     n_eq = len(act) + len(names)
-    if n_eq != model.nq:
-        dof = model.nq - len(act)
-        raise ModelError(Problem(
+
+    def wrong_count(dof: int) -> ModelError:
+        return ModelError(Problem(
             "initial", "joints",
             f"the mechanism has {dof} free degree(s) of freedom at t = {t:g} s "
-            f"({model.nq} coordinates, {len(act)} constraint rows), so [initial] joints must "
+            f"({model.nq} coordinates, {len(act)} constraint rows, "
+            f"{len(act) - (model.nq - dof)} of them redundant), so [initial] joints must "
             f"name {dof} non-driven joint coordinate(s); it names {len(names)}"
             + (f" ({', '.join(names)})" if names else "")), model.mech.source)
+
+    if n_eq < model.nq:
+        raise wrong_count(model.nq - len(act))
 
     def fun(q):
         con, c, c_q = model.kinematics(q, t, p)
@@ -87,12 +92,18 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
         r, J = fun(q)
         if np.max(np.abs(r), initial=0.0) < 1e-14:
             break
-        try:
-            q = q - np.linalg.solve(J, r)
+        try:  # more rows than coordinates: a redundant set, solved in least squares
+            q = q - (np.linalg.solve(J, r) if J.shape[0] == J.shape[1]
+                     else np.linalg.lstsq(J, r, rcond=None)[0])
         except np.linalg.LinAlgError:
             break
     r, J = fun(q)
     res = float(np.max(np.abs(r), initial=0.0))
+    if n_eq > model.nq:  # redundant rows, or too many coordinates named: count by rank
+        sv = np.linalg.svd(model.kinematics(q, t, p)[0].Phi_q[act], compute_uv=False)
+        rank = int(np.sum(sv > SINGULAR_TOL * sv[0])) if sv.size and sv[0] > 0 else 0
+        if len(names) != model.nq - rank:
+            raise wrong_count(model.nq - rank)
     if res > CLOSE_TOL:
         worst = np.argsort(-np.abs(r))[:4]
         labels = sorted(set(_labels(model, act[worst[worst < len(act)]], names)))
@@ -110,7 +121,7 @@ def check_rank(model: Model, J: np.ndarray, act, names: list[str], t: float) -> 
     """Raise AssemblyError naming the rows of a singular (redundant) square system."""
     U, s, _ = np.linalg.svd(J)
     if s.size and s[-1] < SINGULAR_TOL * s[0]:
-        w = U[:, -1]
+        w = U[:, s.size - 1]
         rows = np.flatnonzero(np.abs(w) > 0.05 * np.max(np.abs(w)))
         idx = list(act) + list(range(len(model.rows), len(model.rows) + len(names)))
         labels = sorted(set(_labels(model, [idx[i] for i in rows], names)))
@@ -131,11 +142,14 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     con, _, c_q = model.kinematics(q, t, p)
     J = np.vstack([con.Phi_q[act], c_q[kidx]])
     rhs = np.concatenate([-con.Phi_t[act], [rates[n] for n in names]])
-    if J.shape[0] != J.shape[1]:
+    if J.shape[0] < J.shape[1]:
         raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
                                  f"joint rates, got {len(names)}"), model.mech.source)
     check_rank(model, J, act, names, t)
-    return np.linalg.solve(J, rhs)
+    if J.shape[0] == J.shape[1]:
+        return np.linalg.solve(J, rhs)
+    v = np.linalg.lstsq(J, rhs, rcond=None)[0]  # redundant rows: consistent, least squares
+    return v
 
 
 def start_state(model: Model, hs: HybridState, t0: float = 0.0
@@ -193,3 +207,12 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
         else:  # the same decision as when a slipping joint comes to rest
             events.append(stick_or_slip(hs, q, v, t0, name).event)
     return q, v, events
+
+
+def redundant_base_rows(model: Model, t0: float = 0.0) -> tuple[int, ...]:
+    """Joint and driver rows redundant at the start (indices into ``model.all_rows``): the
+    mechanism assembled with no lock, and the rows that depend on the others there."""
+    mech = model.mech
+    known = {k: v for k, v in mech.initial.joints.items() if k not in mech.drivers}
+    q = assemble_positions(model, t0, model.params(), known, initial_guess(model))
+    return redundant_rows(model, q, t0)

@@ -81,7 +81,7 @@ class Model:
         Limited joints, in the order of their lock rows and of ``p``.
     """
 
-    def __init__(self, mech: Mechanism, *, compiled: bool = False):
+    def __init__(self, mech: Mechanism, *, compiled: bool = False, drop: tuple[int, ...] = ()):
         self.mech = mech
         self.body_names = list(mech.bodies)
         self.joint_names = list(mech.joints)
@@ -154,9 +154,24 @@ class Model:
         for name, d in mech.drivers.items():
             rows.append(c[jidx[name]] - driver_expr(d, t))
             self.rows.append(Row("driver", name))
+        n_base = len(rows)
         for k, name in enumerate(self.locks):
             rows.append(p[k] * (c[jidx[name]] - p[nl + k]))
             self.rows.append(Row("lock", name))
+        # Redundant joint and driver rows (dependent on the others wherever the mechanism
+        # can be) are left out of the equations; the reactions are then shared among all
+        # rows as the minimum-norm solution (post-processing, with ``base_fn``).
+        #: every row before any was dropped, and the dropped ones (indices into it)
+        self.all_rows = list(self.rows)
+        self.dropped = tuple(sorted(set(drop)))
+        if any(not 0 <= i < n_base for i in self.dropped):
+            raise ValueError(f"only joint and driver rows can be dropped, got {drop}")
+        self.base_fn = ca.Function("base", [q, t], [ca.densify(ca.jacobian(
+            ca.vertcat(*rows[:n_base]) if n_base else ca.SX(0, 1), q))])
+        self.n_base = n_base
+        keep = [i for i in range(len(rows)) if i not in self.dropped]
+        rows = [rows[i] for i in keep]
+        self.rows = [self.rows[i] for i in keep]
         self.m = m = len(rows)
         self.n_fixed = m - nl
         phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)

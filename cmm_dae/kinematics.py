@@ -72,3 +72,19 @@ def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
             labels.append(lab)
     return labels, ratio
 
+
+
+def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
+                   ) -> tuple[int, ...]:
+    """Joint and driver rows that depend on the others at q (a redundant constraint set:
+    a parallelogram with a third crank, say): indices into ``model.all_rows``, found by a
+    QR factorisation with column pivoting of the rows' Jacobian (transposed)."""
+    from scipy.linalg import qr
+
+    A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
+    if A.shape[0] == 0:
+        return ()
+    _, R, piv = qr(A.T, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > tol * d[0])) if d.size and d[0] > 0 else 0
+    return tuple(sorted(int(i) for i in piv[rank:]))

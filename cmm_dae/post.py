@@ -49,6 +49,24 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     return sol[:, :nq], sol[:, nq:], Phi_q
 
 
+def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,
+                        Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Multipliers and Jacobian over every row (the dropped redundant ones included): the
+    generalized force of the joint and driver rows, ``Phi_q^T lambda``, is what the
+    equations determine; among the multipliers of all those rows that give it, the one of
+    minimum norm (a redundant set's reactions are not determined by rigid-body mechanics)."""
+    n, nb = t.size, model.n_base
+    B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
+        1, 0, 2)
+    nkeep = nb - len(model.dropped)
+    G = np.einsum("nrk,nr->nk", Phi_q[:, :nkeep, :], lam[:, :nkeep])
+    # rcond: the redundant directions are zero only to round-off; cut them, not the small
+    # but real singular values near a singular position
+    lam_base = np.einsum("nrk,nk->nr", np.linalg.pinv(B.transpose(0, 2, 1), rcond=1e-10), G)
+    return (np.concatenate([lam_base, lam[:, nkeep:]], axis=1),
+            np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
+
+
 def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  config: np.ndarray, configurations: list[Configuration],
                  params: list[np.ndarray], events: list[Event], stats: Stats,
@@ -79,8 +97,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     else:
         nj = len(model.joint_names)
         a = np.zeros((0, model.nq))
-        lam = np.zeros((0, model.m))
-        Phi_q = np.zeros((0, model.m, model.nq))
+        lam = np.zeros((0, len(model.all_rows)))
+        Phi_q = np.zeros((0, len(model.all_rows), model.nq))
         c = cd = cdd = np.zeros((nj, 0))
         pts = np.zeros((2, 0))
         phi = hvel = np.zeros((0, model.m))
@@ -91,12 +109,19 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
 
+    if model.dropped and n:  # redundant rows: the reactions shared out at minimum norm
+        lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
+    rows_all = model.all_rows
+
+    def rows_of(kind: str, name: str) -> list[int]:
+        return [i for i, r in enumerate(rows_all) if r.kind == kind and r.name == name]
+
     nj = len(model.joint_names)
     pts = pts.reshape(2, n, nj).transpose(1, 2, 0) if n else np.zeros((0, nj, 2))
     jforce = np.zeros((n, nj, 2))
     jtorque = np.zeros((n, nj))
     for k, (name, j) in enumerate(mech.joints.items()):
-        rows = model.rows_of("joint", name) + model.rows_of("lock", name)
+        rows = rows_of("joint", name) + rows_of("lock", name)
         G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
         ref = pts[:, k, :]
         if j.second_body != GROUND:
@@ -116,7 +141,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         k = model.joint_names.index(name)
         fk = mech.joints[name].friction.kinetic
         s = P[:, model.slip_slot(name)] if n else np.zeros(0)
-        row = model.n_fixed + model.locks.index(name)
+        row = model.n_base + model.locks.index(name)
         lock = -lam[:, row] if n else np.zeros(0)  # the lock row's force along +c
         side_of = np.array([dict(zip(c.locked, c.sides, strict=True)).get(name, "")
                             for c in configurations])  # per configuration, once
@@ -126,7 +151,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
     effort = np.zeros((n, len(model.driver_names)))
     for k, name in enumerate(model.driver_names):
-        effort[:, k] = -lam[:, model.rows_of("driver", name)[0]]
+        effort[:, k] = -lam[:, rows_of("driver", name)[0]]
 
     data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
             "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
@@ -145,7 +170,11 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         "joints": model.joint_names,
         "joint_types": [j.type for j in mech.joints.values()],
         "drivers": model.driver_names,
-        "rows": [f"{r.kind} {r.name}" for r in model.rows],
+        "rows": [f"{r.kind} {r.name}" for r in model.all_rows],
+        # rows left out of the equations as redundant; their reactions (and those of the
+        # rows they depend on) are the minimum-norm solution
+        "redundant": [f"{model.all_rows[i].kind} {model.all_rows[i].name}"
+                      for i in model.dropped],
         "gravity": list(mech.gravity),
         "springs": {n: [j.spring.stiffness, j.spring.rest] for n, j in mech.joints.items()
                     if j.spring is not None},

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import events as ev
-from .assembly import start_state
+from .assembly import redundant_base_rows, start_state
 from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
@@ -194,6 +194,10 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         model = None  # the solved parameters are compiled into the model: build it anew
     try:
         model = model if model is not None else Model(mech)
+        if not model.dropped and model.m > 0:
+            drop = redundant_base_rows(model)
+            if drop:  # a redundant constraint set: equations without the dependent rows
+                model = Model(mech, drop=drop)
         build = time.perf_counter() - wall0
         hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
         q, v, events = start_state(model, hs)

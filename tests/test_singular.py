@@ -96,3 +96,44 @@ def test_shipped_a02_file_is_the_builder_mechanism():
     assert shipped.ground == built.ground and shipped.initial == built.initial
     a01 = cd.load(cd.example("iftomm_a01_pendulum"))
     assert a01.bodies["bob"].inertia == 0.0 and a01.bodies["bob"].centroid == (1.0, 0.0)
+
+
+def three_crank_parallelogram() -> cd.Mechanism:
+    """Three unit cranks on ground pivots 1 m apart carrying one rigid 2 m coupler pinned
+    to all three tips: Grübler counts 0 degrees of freedom, the mechanism has 1 (one
+    redundant constraint, the third crank)."""
+    half, inertia = math.pi / 2, 1.0 / 12.0
+    bodies = [cd.Body(f"crank{i}", 1.0, inertia, (0.5, 0.0), {"O": (0, 0), "P": (1.0, 0.0)},
+                      guess=(float(i), 0.0, half)) for i in range(3)]
+    bodies.append(cd.Body("coupler", 2.0, 8.0 / 12.0, (1.0, 0.0),
+                          {f"P{i}": (float(i), 0.0) for i in range(3)}, guess=(0.0, 1.0, 0.0)))
+    joints = [cd.Joint(f"G{i}", "revolute", f"ground.O{i}", f"crank{i}.O") for i in range(3)]
+    joints += [cd.Joint(f"C{i}", "revolute", f"crank{i}.P", f"coupler.P{i}") for i in range(3)]
+    return cd.Mechanism("three-crank parallelogram", bodies, joints,
+                        ground={f"O{i}": (float(i), 0.0) for i in range(3)},
+                        gravity=(0.0, -iftomm.G), initial=cd.Initial({"G0": half}, {"G0": -1.0}))
+
+
+def test_redundant_constraints_with_minimum_norm_reactions():
+    res = cd.run_dae(three_crank_parallelogram(), 1.3, rtol=1e-10, atol=1e-12)
+    assert len(res.meta["redundant"]) == 1  # one row left out of the equations
+    # the motion: every crank turns alike; one coordinate, 3 cranks and a 2-kg coupler
+    inertia, weight = 3.0 / 3.0 + 2.0, (3 * 0.5 + 2.0) * iftomm.G
+    from scipy.integrate import solve_ivp
+
+    sol = solve_ivp(lambda _, y: [y[1], -weight * math.cos(y[0]) / inertia], (0, 1.3),
+                    [math.pi / 2, -1.0], t_eval=res.t, rtol=1e-13, atol=1e-14,
+                    method="DOP853")
+    ref = np.column_stack([np.cos(sol.y[0]), np.sin(sol.y[0])])
+    assert np.max(np.hypot(*(iftomm.crank_tip(res) - ref).T)) <= 1e-8
+    assert len([e for e in res.events if e.kind == "singular"]) == 2
+    # minimum norm: at t = 0 the coupler (2 kg) is carried up at its centripetal
+    # acceleration of 1 m/s^2 downwards: 2 (g - 1) N, shared equally by the three pins
+    share = 2.0 * (iftomm.G - 1.0) / 3.0
+    for i in range(3):
+        assert res.joint(f"C{i}").force[0] == pytest.approx([0.0, share], abs=1e-9)
+    # and at every sample the pins' forces move the coupler as Newton says
+    acc = res.body("coupler").acceleration[:, :2]
+    total = sum(res.joint(f"C{i}").force for i in range(3))
+    # (measured 1.2e-8 N at most, beside the near-singular sample before a crossing)
+    assert np.max(np.abs(total + np.array([0.0, -2.0 * iftomm.G]) - 2.0 * acc)) <= 5e-8
