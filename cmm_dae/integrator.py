@@ -36,6 +36,8 @@ class RunOptions:
     max_steps: int = 500_000
     #: a progress bar moved to the time reached (None: none)
     progress: Bar | None = None
+    #: branch at a singular position: None (the branch of the motion) or (joint, +1 / -1)
+    branch: tuple[str, int] | None = None
 
 
 @dataclass(frozen=True)

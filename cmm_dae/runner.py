@@ -123,7 +123,8 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
              rtol: float = 1e-8, atol: float = 1e-10, output_dt: float | None = 0.01,
              dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
              v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
-             model: Model | None = None, progress: bool = False) -> Result:
+             model: Model | None = None, progress: bool = False,
+             branch: str | tuple[str, int] = "continue") -> Result:
     """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
 
     Parameters
@@ -158,6 +159,10 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         A prebuilt model of ``mech`` (saves the CasADi build).
     progress : bool
         Draw a progress bar of the simulated time on stderr.
+    branch : "continue" or (joint, sign)
+        Which branch to take at a singular position: the branch of the motion (continuity
+        of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
+        or -1; where one loop is singular at a time).
 
     Returns
     -------
@@ -175,8 +180,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
                          output_every=output_every, max_events=max_events, v_lock=v_lock,
                          max_steps=max_steps)
+    rule = _branch_rule(mech, branch)
     bar = Bar(opts.t_end, f"{mech.name} ({method})", "s", enabled=progress)
-    opts = dataclasses.replace(opts, progress=bar)
+    opts = dataclasses.replace(opts, progress=bar, branch=rule)
     try:
         with _one_blas_thread():
             res = _run(mech, opts, METHODS[method], throw, model)
@@ -266,12 +272,25 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     return res
 
 
+def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:
+    """The checked branch option: None for "continue", else (joint, +1 or -1)."""
+    if isinstance(branch, str) and branch == "continue":
+        return None
+    ok = (isinstance(branch, tuple | list) and len(branch) == 2 and branch[0] in mech.joints
+          and branch[1] in (1, -1) and not isinstance(branch[1], bool))
+    if not ok:
+        raise ModelError(Problem("run", "branch", f"expected \"continue\" or (joint, +1 or "
+                                 f"-1) with a joint of the mechanism "
+                                 f"({', '.join(mech.joints)}), got {branch!r}"))
+    return str(branch[0]), int(branch[1])
+
+
 def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
                     v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
                     after: list[int]) -> tuple[float, np.ndarray, np.ndarray]:
     """Cross the singular position ahead of (t, q, v): the state after it, one sample
     there and a "singular" event at the singular instant."""
-    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end)
+    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch)
     cfg = hs.current()
     ke = 0.5 * float(np.sum(hs.model.mass * v**2))
     ke1 = 0.5 * float(np.sum(hs.model.mass * cr.v**2))
@@ -279,7 +298,14 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
             f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
             f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
     joint = next((lab.split(" ", 1)[1] for lab in cr.labels if lab.startswith("joint ")), "")
-    events.append(Event(cr.t_singular, "singular", joint, "continue", cfg, cfg,
+    side = "continue" if opts.branch is None else (
+        f"{'switch' if cr.switched else 'continue'} ({opts.branch[0]} "
+        f"{'+' if opts.branch[1] > 0 else '-'})")
+    if cr.switched:
+        note = note.replace("crossed on the branch of the motion", "crossed onto the branch "
+                            f"on which joint {opts.branch[0]} moves "
+                            f"{'forwards' if opts.branch[1] > 0 else 'backwards'}")
+    events.append(Event(cr.t_singular, "singular", joint, side, cfg, cfg,
                         float(np.linalg.norm(v)), float(np.linalg.norm(cr.v)), {},
                         ke - ke1, 0.0, "", note))
     rec.add(cr.t_after, cr.q, cr.v, cfg)
@@ -294,22 +320,24 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,
             output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
             max_steps: int | None = None, throw: bool = True,
-            model: Model | None = None, progress: bool = False) -> Result:
+            model: Model | None = None, progress: bool = False,
+            branch: str | tuple[str, int] = "continue") -> Result:
     """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
     return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                     max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
-                    model=model, progress=progress)
+                    model=model, progress=progress, branch=branch)
 
 
 def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
                   output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
                   max_steps: int | None = None, throw: bool = True,
-                  model: Model | None = None, progress: bool = False) -> Result:
+                  model: Model | None = None, progress: bool = False,
+                  branch: str | tuple[str, int] = "continue") -> Result:
     """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
     ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
     return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
                     v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
-                    model=model, progress=progress)
+                    model=model, progress=progress, branch=branch)
 
 
 __all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate"]

@@ -66,6 +66,7 @@ class Crossing:
     rank_drop: int
     ratio_min: float
     velocity_jump: float
+    switched: bool = False
 
 
 def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
@@ -126,8 +127,77 @@ def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
     return q1, v1, float(np.max(np.abs(q1 - q), initial=0.0))
 
 
+def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
+              ) -> list[np.ndarray]:
+    """Velocities of the other branches through the singular position q (rank drop 1).
+
+    A branch's tangent v keeps the velocity constraints and the acceleration-level one
+    projected on the left null vector w of the constraint Jacobian, where the accelerations
+    drop out: ``w . gamma(q, v, t) = 0`` (quadratic in v). With a driver the velocities
+    are ``v + c n`` (n the new null direction; c = 0 is the branch of the motion); without
+    one, the kinetic energy is kept and the tangents are the roots of a quadratic form on
+    the two-dimensional null space."""
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
+    U, sv, Vt = np.linalg.svd(J)
+    rank = int(np.sum(sv > 1e-8 * sv[0]))
+    w = U[:, rank] if rank < U.shape[1] else None
+    null = Vt[rank:].T
+    if w is None or null.shape[1] == 0:
+        return []
+
+    def f(vel: np.ndarray) -> float:
+        return float(w @ model._kkt_parts(q, vel, t, p)[2][act])
+
+    out = []
+    if null.shape[1] == 1:  # driven: f(v + c n) = a c^2 + b c, f(v) = 0
+        n = null[:, 0]
+        f1, fm = f(v + n), f(v - n)
+        a_, b_ = 0.5 * (f1 + fm) - f(v), 0.5 * (f1 - fm)
+        if abs(a_) > 1e-300:
+            out.append(v - (b_ / a_) * n)
+    elif null.shape[1] == 2:  # undriven: unit directions, energy kept
+        Mh = np.sqrt(np.maximum(model.mass, 1e-300))
+        B = null * Mh[:, None]  # M-orthonormal basis of the null space
+        Qb, _ = np.linalg.qr(B)
+        u1, u2 = Qb[:, 0] / Mh, Qb[:, 1] / Mh
+        scale = math.sqrt(float(v @ (model.mass * v)))
+        A_, C_ = f(u1), f(u2)
+        B_ = 0.5 * (f(u1 + u2) - A_ - C_)
+        roots = np.roots([C_, 2 * B_, A_]) if abs(C_) > 1e-300 else np.array([-A_ / (2 * B_)])
+        for r in roots[np.isreal(roots)].real:
+            d = (u1 + r * u2) / math.hypot(1.0, r)
+            for sgn in (1.0, -1.0):
+                cand = sgn * scale * d
+                if np.linalg.norm((cand - v) * Mh) > 1e-3 * scale:  # not the motion's own
+                    out.append(cand)
+    return out
+
+
+def _choose(model: Model, v: np.ndarray, others: list[np.ndarray], q: np.ndarray,
+            rule: tuple[str, int]) -> tuple[np.ndarray, bool]:
+    """The velocity whose joint ``rule[0]`` moves with the sign ``rule[1]``, the branch
+    of the motion first; (velocity, switched)."""
+    joint, sign = rule
+    k = model.jidx[joint]
+
+    def rate(vel):
+        return float(model.joint_rates(q, vel)[1][k])
+
+    scale = max(float(np.max(np.abs(v))), 1e-300)
+    if rate(v) * sign > 1e-9 * scale:
+        return v, False
+    for cand in others:
+        # another branch, moving on (not back along the way it came)
+        if rate(cand) * sign > 1e-9 * scale and float(cand @ (model.mass * v)) > -0.999 * \
+                float(v @ (model.mass * v)):
+            return cand, True
+    raise SolverError(f"no branch through the singular position moves joint '{joint}' "
+                      f"{'forwards' if sign > 0 else 'backwards'}", status=Status.DEAD_POINT)
+
+
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-              t_end: float) -> Crossing:
+              t_end: float, rule: tuple[str, int] | None = None) -> Crossing:
     """Cross the singular position ahead of the state (t, q, v) on the branch of the motion.
 
     Parameters
@@ -140,6 +210,10 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         That state (positions, velocities).
     t_end : float
         End of the run, s (the crossing does not go beyond it).
+    rule : (joint, sign) or None
+        None: the branch of the motion. Else the branch on which that joint's coordinate
+        moves with that sign (+1 or -1), the branch of the motion if it does (only where
+        one loop is singular: a rank drop of 1).
 
     Returns
     -------
@@ -190,12 +264,18 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     nsub = min(SUBSTEPS, max(2, int(r0 * 0.211 / NODE_RATIO)))
     h = tau / nsub
     qq, vv, tt, guess = q, v, t, a0
+    switched = False
     try:
         for k in range(nsub * 20):
             if tt + h > t_end:
                 h = t_end - tt
             qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
             tt += h
+            if k == nsub - 1 and rule is not None:  # at the singular instant: which way
+                qs, vs, _ = _project(model, p, qq, vv, tt)
+                vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs, rule)
+                if switched:  # else the motion goes on undisturbed
+                    qq, vv = qs, vnew
             if tt >= t_end or (k >= nsub and _ratio(model, qq, tt, p) >= AFTER * r0):
                 break
     except np.linalg.LinAlgError as e:
@@ -216,4 +296,4 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     J = model.constraints(path(tau), t_s, p).Phi_q[model.active_rows(p)]
     s = np.linalg.svd(J, compute_uv=False)
     drop = int(np.sum(s < 0.1 * r0 * s[0])) if s.size else 0
-    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump)
+    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump, switched)
