@@ -6,14 +6,15 @@ import csv
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .errors import CmmError
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .result import Result
+# ``res`` below is a cmm_dae.Result; not imported, so that result (which calls these
+# functions) and export do not import each other.
+Result = Any
 
 
 def columns(res: Result) -> dict[str, np.ndarray]:

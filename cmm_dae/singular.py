@@ -37,7 +37,7 @@ from scipy.optimize import minimize_scalar
 
 from .equations import Model
 from .errors import SolverError, Status
-from .kinematics import dependent_rows
+from .kinematics import dependent_rows, project_positions, project_velocities
 
 #: Gauss-Legendre, two stages (order 4): nodes and coefficients.
 _S3 = math.sqrt(3.0) / 6.0
@@ -111,20 +111,11 @@ def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
 
 def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
              ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Minimum-norm corrections onto Phi = 0 and Phi_q v + Phi_t = 0; the position change."""
-    act = model.active_rows(p)
-    q1 = q.copy()
-    for _ in range(20):
-        con = model.constraints(q1, t, p)
-        r = con.phi[act]
-        if np.max(np.abs(r), initial=0.0) < 1e-14:
-            break
-        q1 = q1 - np.linalg.lstsq(con.Phi_q[act], r, rcond=None)[0]
-    con = model.constraints(q1, t, p)
-    J = con.Phi_q[act]
-    r = J @ v + con.Phi_t[act]
-    v1 = v - np.linalg.lstsq(J, r, rcond=None)[0]
-    return q1, v1, float(np.max(np.abs(q1 - q), initial=0.0))
+    """Minimum-norm corrections onto the constraints (the kinematics' projections); the
+    largest position change."""
+    q1 = project_positions(model, q, t, p)
+    return q1, project_velocities(model, q1, v, t, p), float(np.max(np.abs(q1 - q),
+                                                                    initial=0.0))
 
 
 def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray

@@ -26,6 +26,23 @@ from cmm_dae import iftomm
 OUT = Path(__file__).resolve().parent / "out"
 
 
+def _ida_on(res, y0: np.ndarray, yp0: np.ndarray, grid: np.ndarray, rtol: float):
+    """scikit-sundae's IDA on a residual, counting its steps (the root function runs once
+    a step, as in cmm_dae): (solution, steps)."""
+    steps, last = [0], [-1.0]
+
+    def events(t, y, yp, out):
+        if t > last[0]:
+            last[0] = t
+            steps[0] += 1
+        out[0] = 1.0
+
+    events.terminal, events.direction = [False], [0]
+    solver = sun.ida.IDA(res, rtol=rtol, atol=rtol * 1e-2, eventsfn=events, num_events=1,
+                         max_num_steps=100_000_000)
+    return solver.solve(grid, y0, yp0), steps[0]
+
+
 def minimal_a01(t_end: float, rtol: float) -> tuple[int, float, float]:
     """The same IDA on the pendulum's minimal residual (angle from +x, rate): steps, wall
     time and the mass's largest position error against the exact solution."""
@@ -35,24 +52,12 @@ def minimal_a01(t_end: float, rtol: float) -> tuple[int, float, float]:
         r[0] = yp[0] - y[1]
         r[1] = yp[1] + g * np.cos(y[0])
 
-    steps = [0]
-    last = [-1.0]
-
-    def events(t, y, yp, out):  # counts IDA's steps (root functions run once a step)
-        if t > last[0]:
-            last[0] = t
-            steps[0] += 1
-        out[0] = 1.0
-
-    events.terminal, events.direction = [False], [0]
-    solver = sun.ida.IDA(res, rtol=rtol, atol=rtol * 1e-2, eventsfn=events, num_events=1,
-                         max_num_steps=100_000_000)
     grid = np.linspace(0.0, t_end, int(t_end / 0.1) + 1)
     t0 = time.perf_counter()
-    sol = solver.solve(grid, np.array([0.0, 0.0]), np.array([0.0, -g]))
+    sol, steps = _ida_on(res, np.array([0.0, 0.0]), np.array([0.0, -g]), grid, rtol)
     wall = time.perf_counter() - t0
     pos = np.column_stack([np.cos(sol.y[:, 0]), np.sin(sol.y[:, 0])])
-    return steps[0], wall, float(np.max(np.hypot(*(pos - iftomm.a01_reference(sol.t)).T)))
+    return steps, wall, float(np.max(np.hypot(*(pos - iftomm.a01_reference(sol.t)).T)))
 
 
 def minimal_a02(n: int, t_end: float, rtol: float) -> tuple[int, float]:
@@ -65,22 +70,12 @@ def minimal_a02(n: int, t_end: float, rtol: float) -> tuple[int, float]:
         r[0] = yp[0] - y[1]
         r[1] = yp[1] + weight * np.cos(y[0]) / inertia
 
-    steps, last = [0], [-1.0]
-
-    def events(t, y, yp, out):
-        if t > last[0]:
-            last[0] = t
-            steps[0] += 1
-        out[0] = 1.0
-
-    events.terminal, events.direction = [False], [0]
-    solver = sun.ida.IDA(res, rtol=rtol, atol=rtol * 1e-2, eventsfn=events, num_events=1,
-                         max_num_steps=100_000_000)
     grid = np.linspace(0.0, t_end, int(t_end / 0.01) + 1)
     y0 = np.array([np.pi / 2, -1.0])
-    sol = solver.solve(grid, y0, np.array([-1.0, -weight * np.cos(y0[0]) / inertia]))
+    sol, steps = _ida_on(res, y0, np.array([-1.0, -weight * np.cos(y0[0]) / inertia]), grid,
+                         rtol)
     tip = np.column_stack([np.cos(sol.y[:, 0]), np.sin(sol.y[:, 0])])
-    return steps[0], float(np.max(np.hypot(*(tip - iftomm.a02_reference(n, sol.t)).T)))
+    return steps, float(np.max(np.hypot(*(tip - iftomm.a02_reference(n, sol.t)).T)))
 
 
 def run_a01(t_end: float, rtol: float) -> dict:
