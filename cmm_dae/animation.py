@@ -19,6 +19,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .errors import CmmError  # noqa: E402
+
 if TYPE_CHECKING:  # pragma: no cover
     from .result import Result
 
@@ -30,8 +32,8 @@ class _Scene:
     """World coordinates of everything drawn, at the frames' sample indices."""
 
     def __init__(self, res: Result, max_frames: int) -> None:
-        if max_frames < 1:
-            raise ValueError("max_frames must be at least 1")
+        if not (isinstance(max_frames, int) and max_frames >= 1):
+            raise CmmError(f"frames: expected a whole number >= 1, got {max_frames!r}")
         self.res = res
         meta = res.meta
         n = res.t.size
@@ -218,8 +220,8 @@ def animate(res: Result, path: str | Path, *, fps: int = 20,
     """
     from PIL import Image
 
-    if fps < 1:
-        raise ValueError("fps must be at least 1")
+    if not (isinstance(fps, int) and fps >= 1):
+        raise CmmError(f"fps: expected a whole number >= 1 of frames per second, got {fps!r}")
     path = Path(path)
     images = [Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE, colors=64)
               for f in _frames(res, max_frames, dpi)]

@@ -78,6 +78,7 @@ class IdaIntegrator(Integrator):
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
         self.relaxed = False  # multipliers still in the error test
+        self.crossed_at = math.nan  # where the last singular-position crossing ended
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
         # jump in the prescribed acceleration, so the run restarts there.
         self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
@@ -154,6 +155,7 @@ class IdaIntegrator(Integrator):
         # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
         # restart (order 1, small steps) fails on their error test alone.
         self.relax_multipliers()
+        self.crossed_at = t
 
     def relax_multipliers(self) -> None:
         """Leave the multipliers out of IDA's error test from now on, as index-2 variables
@@ -251,6 +253,10 @@ class IdaIntegrator(Integrator):
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
         T, Y = np.asarray(r.t), np.asarray(r.y)
+        if r.status < 0 and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
+            # IDA cannot restart where a singular-position crossing ended: still too near
+            # it; the policy takes the crossing further out
+            return SegmentEnd(t0, q, v, (), "singular")
         if r.status < 0 and self.error is None and T[-1] <= t0 and not self.relaxed:
             # IDA could not take a first step: large or near-singular constraint sets (long
             # chains, just past a singular position) fail on the multipliers' error test
@@ -306,7 +312,9 @@ class IdaIntegrator(Integrator):
         # dead point shows as a collapse of the smallest singular value (units mix, so
         # only the ratio of the two says anything)
         labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
-        if ratio < 0.2 * self.ratio0 or (ratio < 0.05 and self._ratio_falls(q, tt, ratio)):
+        # (also a failure very near one, ahead or just past it: the policy tells which)
+        if ratio < 0.2 * self.ratio0 or ratio < 0.01 or (
+                ratio < 0.05 and self._ratio_falls(q, tt, ratio)):
             what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")

@@ -292,6 +292,13 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
     there and a "singular" event at the singular instant."""
     cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch)
     cfg = hs.current()
+    if events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
+        # the integrator could not restart where the last crossing ended: the same
+        # crossing, taken further out (one event, its sample moved)
+        rec.add(cr.t_after, cr.q, cr.v, cfg)
+        after[-1] = len(rec) - 1
+        integ.after_singular(cr.t_after)
+        return cr.t_after, cr.q, cr.v
     ke = 0.5 * float(np.sum(hs.model.mass * v**2))
     ke1 = 0.5 * float(np.sum(hs.model.mass * cr.v**2))
     note = (f"constraints of {', '.join(cr.labels)} dependent for an instant (rank drop "

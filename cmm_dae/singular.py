@@ -50,6 +50,11 @@ _B = np.array([0.5, 0.5])
 SUBSTEPS = 6
 #: Smallest singular-value ratio wanted at a Gauss node (fewer steps where it would be less).
 NODE_RATIO = 5e-5
+#: ... and, after a failure just past the singular instant, at least this ratio, where
+#: the integrators restart reliably.
+END_RATIO = 0.03
+#: Below this singular-value ratio a failure just past a singular instant is crossed too.
+PAST_RATIO = 0.1
 #: The crossing ends where the singular-value ratio is this many times the one at its start.
 AFTER = 12.0
 
@@ -234,30 +239,55 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     # the ratio falls about linearly to the singular instant: its rate gives the scale
     probe = 1e-6 / max(vnorm, 1e-300)
     rate = (_ratio(model, path(probe), t + probe, p) - r0) / probe
-    if not rate < 0.0:
+    past = rate >= 0.0
+    if past and not r0 < PAST_RATIO:
         raise dead("the motion does not approach a singular position: it cannot go on")
-    tau_lin = r0 / -rate
-    opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
-                          bounds=(0.0, 3.0 * tau_lin), method="bounded",
-                          options={"xatol": 1e-6 * tau_lin})
-    tau = float(opt.x)
-    r_min = float(opt.fun)
-    if not 0.0 < tau < 2.9 * tau_lin:
-        raise dead("no singular instant was found ahead")
-    t_s = t + tau
-    # Gauss steps of tau / nsub: the singular instant is a step end; then on until the
-    # constraints are as well conditioned as where the integrator stopped, AFTER times over
-    # (it stopped because they were not well conditioned enough for it)
-    # More steps where the integrator stopped far from the singular instant (accuracy);
-    # few where it came close, so that no Gauss node falls where the accelerations are
-    # dominated by the round-off the near-singular solve amplifies.
-    # (the node nearest it lies 0.211 h away, where the ratio is about r0 * 0.211 / nsub)
-    nsub = min(SUBSTEPS, max(2, int(r0 * 0.211 / NODE_RATIO)))
-    h = tau / nsub
+    if past:
+        # the integrator stepped across the singular instant itself and failed just
+        # beyond it: the instant lies behind, where the ratio extrapolates to zero; only
+        # the way out is left to cross
+        tau_back = r0 / max(rate, 1e-300)
+        tau, r_min, t_s = 0.0, r0, t - min(tau_back, t)
+        nsub = 0
+        h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
+    else:
+        tau_lin = r0 / -rate
+        opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
+                              bounds=(0.0, 3.0 * tau_lin), method="bounded",
+                              options={"xatol": 1e-6 * tau_lin})
+        tau = float(opt.x)
+        r_min = float(opt.fun)
+        if not 0.0 < tau < 2.9 * tau_lin:
+            raise dead("no singular instant was found ahead")
+        t_s = t + tau
+        # Gauss steps of tau / nsub: the singular instant is a step end; then on until
+        # the constraints are as well conditioned as where the integrator stopped, AFTER
+        # times over (it stopped because they were not well conditioned enough for it).
+        # More steps where the integrator stopped far from the singular instant
+        # (accuracy); few where it came close, so that no Gauss node falls where the
+        # accelerations are dominated by the round-off the near-singular solve amplifies
+        # (the node nearest it lies 0.211 h away, where the ratio is about
+        # r0 * 0.211 / nsub).
+        nsub = min(SUBSTEPS, int(r0 * 0.211 / NODE_RATIO))
+        if nsub >= 2:
+            h = tau / nsub
+        else:
+            # The integrator came so close that even a step ending at the singular
+            # instant would put a node in the round-off zone: one step over it instead,
+            # long enough for both nodes to lie beyond it at a safe ratio (the
+            # collocation polynomial spans the instant; the accelerations are not
+            # needed there).
+            nsub = 0
+            h = (tau + 20.0 * NODE_RATIO / -rate) / _C[0]
+    # Constant steps on the way out, unless the way out (to a ratio where the integrators
+    # restart reliably) would take more than 100 of them: then growing ones.
+    target = max(AFTER * r0, END_RATIO, 4.0 * r0) if past else max(AFTER * r0, 0.2 * END_RATIO)
+    way_out = (target - r0) / max(abs(rate), 1e-300) + tau
+    grow = 1.0 if way_out <= 100 * h else 1.1
     qq, vv, tt, guess = q, v, t, a0
     switched = False
     try:
-        for k in range(nsub * 20):
+        for k in range(nsub + 200):
             if tt + h > t_end:
                 h = t_end - tt
             qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
@@ -267,8 +297,10 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
                 vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs, rule)
                 if switched:  # else the motion goes on undisturbed
                     qq, vv = qs, vnew
-            if tt >= t_end or (k >= nsub and _ratio(model, qq, tt, p) >= AFTER * r0):
-                break
+            if k >= nsub - 1:
+                if tt >= t_end or _ratio(model, qq, tt, p) >= target:
+                    break
+                h *= grow
     except np.linalg.LinAlgError as e:
         raise dead(f"the motion cannot be continued through it ({e})") from None
     q1, v1, dq = _project(model, p, qq, vv, tt)

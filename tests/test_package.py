@@ -178,3 +178,10 @@ def test_progress_bar_reaches_the_end(capsys):
     assert res.success and err.rstrip().endswith("s/s wall)") and "1/1 s" in err
     cd.run_iterative(cd.load(cd.example("pendulum_stop")), 0.5)
     assert capsys.readouterr().err == ""  # no bar unless asked
+
+
+def test_cli_refuses_bad_animation_settings(capsys, tmp_path):
+    for flag in (["--frames", "0"], ["--fps", "0"]):
+        assert main(["animate", "pendulum_stop", "--t-end", "0.2", "--out",
+                     str(tmp_path / "a.gif"), *flag]) == 2
+        assert "expected a whole number >= 1" in capsys.readouterr().err

@@ -51,10 +51,13 @@ def test_change_point_four_bar_is_driven_through_its_change_point(tmp_path):
     jump = float(re.search(r"velocities continuous to ([0-9.e+-]+)", sing[0].note).group(1))
     assert jump <= 1e-6  # the projection after the crossing hardly changed the velocities
     i = int(np.searchsorted(res.t, sing[0].t))
-    # every joint moves on continuously: no jump in any joint rate across the crossing
+    # every joint moves on continuously: across the crossing its rate changes no more
+    # than its largest acceleration allows over the time the crossing took
+    gap = res.t[i + 1] - res.t[i - 1]
     for j in mech.joints:
-        rate = res.joint(j).velocity
-        assert abs(rate[i + 1] - rate[i - 1]) <= 0.05 * (np.max(np.abs(rate)) + 1e-12)
+        js = res.joint(j)
+        bound = 1.5 * np.max(np.abs(js.acceleration)) * gap
+        assert abs(js.velocity[i + 1] - js.velocity[i - 1]) <= bound
     assert res.drift[0] <= 1e-9 and res.drift[1] <= 1e-6
 
 
@@ -184,3 +187,12 @@ def test_branch_rule_takes_the_anti_parallelogram():
     assert [e.side for e in same.events] == ["continue (G1 -)"]
     with pytest.raises(cd.ModelError, match=r"\[run\] branch"):
         cd.run_dae(mech, 1.0, branch=("X", 1))
+
+
+def test_a02_runs_its_20_seconds_at_the_default_tolerances():
+    """At rtol 1e-8 IDA steps over some singular positions itself and fails just before
+    or just past others; all are crossed."""
+    res = cd.run_dae(cd.load(cd.example("iftomm_a02_four_bar_N1")), 20.0)
+    assert res.success and len([e for e in res.events if e.kind == "singular"]) >= 5
+    err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(1, res.t)).T))
+    assert err <= 3e-4  # measured 1.4e-4 m (2.1e-6 m at rtol 1e-10)
