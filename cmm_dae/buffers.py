@@ -3,6 +3,13 @@
 
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
+import subprocess
+import warnings
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 
@@ -57,43 +64,61 @@ class Buffered:
                 for o, (r, c) in zip(self.outs, self.shapes, strict=True)]
 
 
+def cache_dir() -> Path:
+    """Where compiled libraries are kept: ``$CMM_DAE_CACHE`` (default ``~/.cache/cmm_dae``)."""
+    return Path(os.environ.get("CMM_DAE_CACHE", Path.home() / ".cache" / "cmm_dae"))
+
+
+def c_compiler() -> str | None:
+    """The system C compiler (``$CC``, ``cc`` or ``gcc``), None when there is none."""
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+
+
+def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function] = (),
+                  flags: tuple[str, ...] = ()) -> Path:
+    """A shared library ``cmm_<key>.so`` in :func:`cache_dir` built (unless already there)
+    from C ``sources`` and the CasADi-generated C of ``funcs``; ``flags`` go to the linker.
+    Raises OSError / subprocess.SubprocessError / RuntimeError when it cannot be built."""
+    cc = c_compiler()
+    if cc is None:
+        raise OSError("no C compiler found (set CC or install cc/gcc)")
+    cache = cache_dir()
+    lib = cache / f"cmm_{key}.so"
+    if lib.is_file():
+        return lib
+    cache.mkdir(parents=True, exist_ok=True)
+    files = [str(f) for f in sources or ()]
+    if funcs:
+        gen = ca.CodeGenerator(f"cmm_{key}.c")
+        for f in funcs:
+            gen.add(f)
+        files.append(str(Path(gen.generate(str(cache) + os.sep))))
+    tmp = lib.with_suffix(f".{os.getpid()}.tmp")
+    subprocess.run([cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
+                   check=True, capture_output=True, timeout=600)
+    tmp.replace(lib)  # atomic: parallel runs never load a half-written library
+    return lib
+
+
+def function_key(funcs: list[ca.Function], extra: bytes = b"") -> str:
+    """A short hash naming the library of ``funcs``."""
+    return hashlib.sha256(extra + b"".join(f.serialize().encode() for f in funcs)
+                          ).hexdigest()[:20]
+
+
 def compile_functions(funcs: list[ca.Function]) -> list[ca.Function] | None:
     """C code generation of CasADi functions, compiled by the system C compiler into a
-    shared library cached under ``$CMM_DAE_CACHE`` (default ``~/.cache/cmm_dae``), keyed by
-    a hash of the functions. Returns None, with a warning, when no compiler works: the
-    caller keeps CasADi's virtual machine, which gives the same numbers.
+    shared library cached under :func:`cache_dir`, keyed by a hash of the functions.
+    Returns None, with a warning, when no compiler works: the caller keeps CasADi's
+    virtual machine, which gives the same numbers.
 
     It pays only when the build (seconds) is amortised: the per-call gain is about 12 us
     on the nipper's 98 x 98 Jacobian (see validation/README.md).
     """
-    import hashlib
-    import os
-    import shutil
-    import subprocess
-    import warnings
-    from pathlib import Path
-
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if cc is None:
-        warnings.warn("no C compiler found: using CasADi's virtual machine", stacklevel=3)
-        return None
-    key = hashlib.sha256(b"".join(f.serialize().encode() for f in funcs)).hexdigest()[:20]
-    cache = Path(os.environ.get("CMM_DAE_CACHE", Path.home() / ".cache" / "cmm_dae"))
-    lib = cache / f"cmm_{key}.so"
     try:
-        if not lib.is_file():
-            cache.mkdir(parents=True, exist_ok=True)
-            gen = ca.CodeGenerator(f"cmm_{key}.c")
-            for f in funcs:
-                gen.add(f)
-            src = Path(gen.generate(str(cache) + os.sep))
-            tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-            subprocess.run([cc, "-O2", "-fPIC", "-shared", str(src), "-o", str(tmp)],
-                           check=True, capture_output=True, timeout=600)
-            tmp.replace(lib)  # atomic: parallel runs never load a half-written library
+        lib = build_library(function_key(funcs), None, funcs)
         return [ca.external(f.name(), str(lib)) for f in funcs]
     except (OSError, subprocess.SubprocessError, RuntimeError) as e:
         warnings.warn(f"compiling the model failed ({e}): using CasADi's virtual machine",
                       stacklevel=3)
         return None
-

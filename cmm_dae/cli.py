@@ -50,7 +50,7 @@ def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
     res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
-                   output_dt=args.output_dt, progress=args.progress)
+                   output_dt=args.output_dt, progress=args.progress, compiled=args.compiled)
     _summary(res)
     _save(res, args)
     return 0
@@ -191,7 +191,8 @@ def _sweep(args: argparse.Namespace) -> int:
                            "'cmm_dae[scale]'") from None
         client = Client(args.scheduler)
     table = sweep(mech, params, t_end=args.t_end, client=client, workers=args.workers,
-                  checkpoint=args.out, progress=True, rtol=args.rtol)
+                  checkpoint=args.out, progress=True, rtol=args.rtol,
+                  compiled=args.compiled)
     ok = sum(r["status"] == "success" for r in table.rows)
     print(f"{len(table)} runs ({ok} successful) -> {args.out}")
     return 0
@@ -232,6 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--output-dt", type=float, default=0.01, help="output spacing, s (0.01)")
     r.add_argument("--csv", help="write every series to this CSV file")
     r.add_argument("--save", help="save the Result to this .npz file")
+    r.add_argument("--compiled", action="store_true",
+                   help="run IDA's segments in C (needs a C compiler; built once, cached)")
     r.set_defaults(func=_run)
 
     i = sub.add_parser("iterate", help="simulate a model with the paper's fixed-step algorithm")
@@ -281,6 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
     sw.add_argument("--workers", type=int, default=None, help="local processes (all cores)")
     sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
+    sw.add_argument("--compiled", action="store_true",
+                    help="run IDA's segments in C (needs a C compiler; built once, cached)")
     sw.set_defaults(func=_sweep)
 
     ex = sub.add_parser("examples", help="list the shipped example models")

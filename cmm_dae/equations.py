@@ -293,7 +293,10 @@ class Model:
         self._kkt_parts = Buffered(self.kkt_fn)
         self._post = Buffered(self.post_fn)
         self._free = Buffered(self.free_fn)
-        self._cvel = Buffered(ca.Function("cvel", [q, v], [dn(c), dn(cdot)]))
+        #: joint coordinates and rates (q, v) -> (c, cdot); also the symbolic base of
+        #: IDA's event functions
+        self.cvel_fn = ca.Function("cvel", [q, v], [dn(c), dn(cdot)])
+        self._cvel = Buffered(self.cvel_fn)
         #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
         self.event_parts = Buffered(ca.Function(
             "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
@@ -317,6 +320,10 @@ class Model:
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
         # Transposed: CasADi writes column-major, scikit-sundae's JJ is row-major.
         self.jac_fn = ca.Function("resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
+        #: the residual and its Jacobian for C (:mod:`cmm_dae.csegment`): the Jacobian
+        #: column-major, as SUNDIALS stores a dense matrix
+        self.c_functions = (ca.Function("cmm_res", [t, y, yp, p], [F]),
+                            ca.Function("cmm_jac", [t, y, yp, cj, p], [ca.densify(J)]))
         self.compiled = False
         if compiled:
             funcs = compile_functions([self.res_fn, self.jac_fn])

@@ -63,18 +63,26 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
     return out
 
 
-def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarray | None,
-                 triggers: list[Trigger], out: np.ndarray) -> None:
+def _pick(cond, a, b):
+    """``a if cond else b`` for numbers (:func:`event_values`' default ``where``)."""
+    return a if cond else b
+
+
+def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
+                 where=_pick) -> None:
     """Values of the event functions of ``triggers`` (see :func:`event_list`) into ``out``.
 
     A gap is armed only while its joint approaches the stop (+1 while it moves away): just
     after a release or a rejected root the joint leaves at almost zero speed and round-off
     in the gap would otherwise read as arrivals, one restart after the other. The jump to
-    +1 is never a downward crossing. A push needs the multipliers ``lam`` of a KKT solve."""
+    +1 is never a downward crossing. A push needs the multipliers ``lam`` of a KKT solve.
+
+    Written once for numbers and for CasADi expressions: with ``where=casadi.if_else`` and
+    symbolic ``c``, ``cdot``, ``lam`` (``out`` a list) it builds IDA's event function."""
     jidx = hs.model.jidx
     for i, tr in enumerate(triggers):
         if tr.kind == "zone":
-            out[i] = _zone_margin(hs, tr.joint, c, cdot)
+            out[i] = _zone_margin(hs, tr.joint, c, cdot, where)
         elif tr.kind == "rate":  # positive while it slips on in its direction
             out[i] = hs.slip.get(tr.joint, 0) * cdot[jidx[tr.joint]]
         elif tr.kind == "slip":  # positive while the stuck joint carries less than Fs
@@ -83,9 +91,9 @@ def event_values(hs: HybridState, c: np.ndarray, cdot: np.ndarray, lam: np.ndarr
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
             if tr.side == "lower":
-                out[i] = 1.0 if cdot[k] > 0.0 else c[k] - L
+                out[i] = where(cdot[k] > 0.0, 1.0, c[k] - L)
             else:
-                out[i] = 1.0 if cdot[k] < 0.0 else L - c[k]
+                out[i] = where(cdot[k] < 0.0, 1.0, L - c[k])
         else:  # friction holds a joint on its stop until the pull beats it
             out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint)
 

@@ -38,6 +38,8 @@ class RunOptions:
     progress: Bar | None = None
     #: branch at a singular position: None (the branch of the motion) or (joint, +1 / -1)
     branch: tuple[str, int] | None = None
+    #: IDA: run each segment in C (:mod:`cmm_dae.csegment`) where a compiler is present
+    compiled: bool = False
 
 
 @dataclass(frozen=True)

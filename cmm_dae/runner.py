@@ -124,7 +124,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
              dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
              v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
              model: Model | None = None, progress: bool = False,
-             branch: str | tuple[str, int] = "continue") -> Result:
+             branch: str | tuple[str, int] = "continue", compiled: bool = False) -> Result:
     """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
 
     Parameters
@@ -163,6 +163,12 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         Which branch to take at a singular position: the branch of the motion (continuity
         of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
         or -1; where one loop is singular at a time).
+    compiled : bool
+        IDA: run each configuration segment in C (IDA, the residual, its Jacobian and the
+        event functions; built with the system C compiler on first use and cached). Same
+        events and numbers to round-off; pays on long runs and sweeps. Without a working
+        compiler (or with load laws given as Python callables) it warns once and runs the
+        Python path.
 
     Returns
     -------
@@ -182,7 +188,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
                          max_steps=max_steps)
     rule = _branch_rule(mech, branch)
     bar = Bar(opts.t_end, f"{mech.name} ({method})", "s", enabled=progress)
-    opts = dataclasses.replace(opts, progress=bar, branch=rule)
+    opts = dataclasses.replace(opts, progress=bar, branch=rule, compiled=bool(compiled))
     try:
         with _one_blas_thread():
             res = _run(mech, opts, METHODS[method], throw, model)
@@ -328,11 +334,11 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: f
             output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
             max_steps: int | None = None, throw: bool = True,
             model: Model | None = None, progress: bool = False,
-            branch: str | tuple[str, int] = "continue") -> Result:
+            branch: str | tuple[str, int] = "continue", compiled: bool = False) -> Result:
     """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
     return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                     max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
-                    model=model, progress=progress, branch=branch)
+                    model=model, progress=progress, branch=branch, compiled=compiled)
 
 
 def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,

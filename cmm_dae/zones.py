@@ -10,22 +10,26 @@ from .hybrid import HybridState, Transition
 from .result import Event
 
 
-def _zone_margin(hs: HybridState, load: str, c: np.ndarray, cdot: np.ndarray) -> float:
+def _zone_margin(hs: HybridState, load: str, c, cdot, where=None):
     """Distance of a zone's joint coordinate to the edge it moves toward, positive while
     the load's acting state matches where the coordinate is (acting inside, idle
     outside). As with the stops, an edge is armed only while the coordinate approaches
     it (+1 otherwise): a coordinate at rest on an edge (a jaw closed on its stop at the
-    end of a cut) must not read as a root at every restart."""
+    end of a cut) must not read as a root at every restart. ``where`` as in
+    :func:`cmm_dae.events.event_values` (numbers when None)."""
+    if where is None:
+        def where(cond, a, b):
+            return a if cond else b
     k, lo, up = hs.model.zone_info[load]
     x, xd = c[k], cdot[k]
     tol = _edge_tol(x)  # on an edge to round-off counts as on it (see zone_switch)
     if load in hs.zones:  # acting: it leaves through the edge ahead
-        return (x - lo) if xd < 0.0 else (up - x) if xd > 0.0 else 1.0
-    if x <= lo + tol:  # idle below the zone: it enters moving up
-        return (lo - x) if xd > 0.0 else 1.0
-    if x >= up - tol:
-        return (x - up) if xd < 0.0 else 1.0
-    return -min(x - lo, up - x)  # idle inside: a mismatch (after a finite step)
+        return where(xd < 0.0, x - lo, where(xd > 0.0, up - x, 1.0))
+    # idle below the zone: it enters moving up; above it, moving down; idle inside is a
+    # mismatch (after a finite step)
+    return where(x <= lo + tol, where(xd > 0.0, lo - x, 1.0),
+                 where(x >= up - tol, where(xd < 0.0, x - up, 1.0),
+                       -where(x - lo < up - x, x - lo, up - x)))
 
 
 def _edge_tol(x: float) -> float:
