@@ -23,7 +23,7 @@ class Buffered:
     function at caller-owned arrays once and :meth:`run` evaluates it without any copy.
     """
 
-    def __init__(self, fn: ca.Function):
+    def __init__(self, fn: ca.Function, sparse: bool = False):
         self.fn = fn
         self.buf, self._call = fn.buffer()
         self.args = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
@@ -33,8 +33,8 @@ class Buffered:
         for i, o in enumerate(self.outs):
             self.buf.set_res(i, memoryview(o))
         self.shapes = [fn.size_out(i) for i in range(fn.n_out())]
-        for i in range(fn.n_out()):
-            if fn.nnz_out(i) != self.shapes[i][0] * self.shapes[i][1]:
+        for i in range(fn.n_out()):  # sparse: outputs are the nonzeros in CSC order
+            if not sparse and fn.nnz_out(i) != self.shapes[i][0] * self.shapes[i][1]:
                 raise ValueError(f"output {i} of {fn.name()} must be dense")
 
     def bind(self, i: int, arr: np.ndarray) -> None:

@@ -37,7 +37,8 @@ SEG_MORE, SEG_STALLED = 100, 101
 #: samples returned to Python at a time (progress bars and Ctrl-C act between chunks)
 CHUNK = 2048
 _SOURCE = Path(__file__).with_name("segment.c")
-_SUNDIALS = ("ida", "core", "nvecserial", "sunmatrixdense", "sunlinsoldense")
+_SUNDIALS = ("ida", "core", "nvecserial", "sunmatrixdense", "sunlinsoldense",
+             "sunmatrixsparse", "sunlinsolsuperlumt")
 _P = ctypes.c_void_p
 _D = ctypes.POINTER(ctypes.c_double)
 _I = ctypes.POINTER(ctypes.c_int)
@@ -73,7 +74,8 @@ def driver() -> ctypes.CDLL:
         lib.cmm_seg_new.argtypes = [
             ctypes.c_int, ctypes.c_int, ctypes.c_int, _P, _P, _P, _P, _P, _P, _P, _P, _D,
             ctypes.c_double, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_long,
-            ctypes.c_long, ctypes.c_int, _D, ctypes.c_int, ctypes.c_int]
+            ctypes.c_long, ctypes.c_int, _D, ctypes.c_int, ctypes.c_int, ctypes.c_int, _I, _I,
+            ctypes.c_int]
         lib.cmm_seg_run.restype = ctypes.c_int
         lib.cmm_seg_run.argtypes = [_P, _D, _D, ctypes.c_int, _I, _I, _L]
         lib.cmm_seg_free.restype = None
@@ -104,7 +106,7 @@ class SegmentRun:
     """What a segment returns, in the shape of scikit-sundae's result (rows from t0)."""
 
     t: np.ndarray
-    y: np.ndarray
+    y: np.ndarray  # q and v only
     status: int
     message: str
     i_events: np.ndarray | None
@@ -118,13 +120,19 @@ class SegmentRun:
 class CompiledModel:
     """A model's compiled residual and Jacobian and its configurations' event functions."""
 
-    def __init__(self, model):
+    def __init__(self, model, sparse: bool = False):
         self.model = model
         self.lib = driver()
-        funcs = list(model.c_functions)
+        self.sparse = sparse
+        # the Jacobian's nonzeros in CSC order, on CasADi's own pattern, whichever solver
+        res, jac = model.c_residual, model.jac_sparse_fn
+        colind, row = model.jac_pattern.get_ccs()
+        self.colptr = np.asarray(colind, dtype=np.intc)
+        self.rowind = np.asarray(row, dtype=np.intc)
+        funcs = [res, jac]
         self.fns = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs)))
         self.res = _pointers(self.fns, "cmm_res")
-        self.jac = _pointers(self.fns, "cmm_jac")
+        self.jac = _pointers(self.fns, jac.name())
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
@@ -175,10 +183,12 @@ class CompiledModel:
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
             D(rtol), D(first_step), max_steps, budget, int(relaxed), tout_.ctypes.data_as(_D),
-            tout_.size, int(tspan.size == 2))
+            tout_.size, int(tspan.size == 2), self.rowind.size,
+            self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse))
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
-        T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :].copy()]
+        ncol = 2 * model.nq  # only q and v are recorded
+        T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :ncol].copy()]
         info = np.zeros(ne, dtype=np.intc)
         stats = np.zeros(4, dtype=np.int_)
         n = ctypes.c_int(0)
@@ -186,7 +196,7 @@ class CompiledModel:
         try:
             while True:
                 cap = CHUNK if tspan.size == 2 else min(CHUNK, tout.size)
-                T, Y = np.empty(cap), np.empty((cap, N))
+                T, Y = np.empty(cap), np.empty((cap, ncol))
                 try:
                     flag = lib.cmm_seg_run(seg, T.ctypes.data_as(_D), Y.ctypes.data_as(_D),
                                            cap, ctypes.byref(n), info.ctypes.data_as(_I),
@@ -217,7 +227,7 @@ _models = None  # model -> CompiledModel (weak keys), made on first use
 _warned = False
 
 
-def for_model(model) -> CompiledModel | None:
+def for_model(model, sparse: bool = False) -> CompiledModel | None:
     """The compiled segment of ``model`` (built on first use, kept with the model), or None
     with a warning (once per process) when it cannot be used: no working C compiler, no
     SUNDIALS libraries from scikit-sundae, or load laws given as Python callables."""
@@ -236,7 +246,7 @@ def for_model(model) -> CompiledModel | None:
         return None
     if _models is None:
         _models = weakref.WeakKeyDictionary()
-    got = _models.get(model)
-    if got is None:
-        got = _models[model] = CompiledModel(model)
-    return got
+    per_model = _models.setdefault(model, {})
+    if sparse not in per_model:
+        per_model[sparse] = CompiledModel(model, sparse)
+    return per_model[sparse]

@@ -320,10 +320,14 @@ class Model:
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
         # Transposed: CasADi writes column-major, scikit-sundae's JJ is row-major.
         self.jac_fn = ca.Function("resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
-        #: the residual and its Jacobian for C (:mod:`cmm_dae.csegment`): the Jacobian
-        #: column-major, as SUNDIALS stores a dense matrix
-        self.c_functions = (ca.Function("cmm_res", [t, y, yp, p], [F]),
-                            ca.Function("cmm_jac", [t, y, yp, cj, p], [ca.densify(J)]))
+        #: the Jacobian's nonzeros in CSC order (scikit-sundae's sparse solver) and its
+        #: structural pattern
+        self.jac_sparse_fn = ca.Function("resjac_sp", [t, y, yp, cj, p], [J])
+        self.jac_pattern = J.sparsity()
+        #: the structural pattern of Phi_q (m, nq)
+        self.phi_q_pattern = Phi_q.sparsity()
+        #: the residual for C (:mod:`cmm_dae.csegment`, with ``jac_sparse_fn``)
+        self.c_residual = ca.Function("cmm_res", [t, y, yp, p], [F])
         self.compiled = False
         if compiled:
             funcs = compile_functions([self.res_fn, self.jac_fn])

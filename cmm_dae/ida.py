@@ -15,6 +15,7 @@ This is the only module that imports scikit-sundae.
 from __future__ import annotations
 
 import math
+import warnings
 
 import casadi as ca
 import numpy as np
@@ -38,6 +39,9 @@ ATOL_LAMBDA = 1e-2
 ATOL_MU = 1e3
 #: The multipliers' absolute tolerance once a singular position has been crossed.
 ATOL_LAMBDA_SINGULAR = 1e3
+#: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
+#: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
+SPARSE_FROM = 300
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
@@ -79,6 +83,19 @@ class IdaIntegrator(Integrator):
         self.res.bind(0, self.t_arr)
         self.res.bind(3, self.p)
         self.jac: Buffered | None = None
+        # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
+        # derivatives outside it, so they keep the dense one
+        self.sparse = not model.callables and (
+            opts.linsolver == "sparse" or (opts.linsolver == "auto" and model.N >= SPARSE_FROM))
+        self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
+        self.ls_options: dict = {}
+        if self.sparse:
+            import scipy.sparse as sp
+
+            colind, row = model.jac_pattern.get_ccs()
+            self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
+                (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
+                shape=(model.N, model.N))}
         self.atol = np.concatenate([np.full(2 * nq, opts.atol), np.full(model.m, ATOL_LAMBDA),
                                     np.full(model.m, ATOL_MU)])
         self.ev_out = np.zeros(0)
@@ -87,7 +104,6 @@ class IdaIntegrator(Integrator):
         self.relaxed = False  # multipliers still in the error test
         self.crossed_at = math.nan  # where the last singular-position crossing ended
         self._ev_cache: dict[tuple, Buffered] = {}
-        self.c = csegment.for_model(model) if opts.compiled else None
         self.n_exact = 0  # event evaluations that needed a KKT solve
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
         # jump in the prescribed acceleration, so the run restarts there.
@@ -106,8 +122,9 @@ class IdaIntegrator(Integrator):
         self.res.run()
 
     def _jacobian(self, t, y, yp, res, cj, JJ):
-        if self.jac is None:
-            self.jac = Buffered(self.model.jac_fn)
+        if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
+            self.jac = (Buffered(self.model.jac_sparse_fn, sparse=True) if self.sparse
+                        else Buffered(self.model.jac_fn))
             self.jac.bind(0, self.t_arr)
             self.jac.bind(3, self.cj_arr)
             self.jac.bind(4, self.p)
@@ -275,10 +292,14 @@ class IdaIntegrator(Integrator):
 
         eventsfn.direction = [0] + [-1] * len(self.triggers)
         eventsfn.terminal = [True] * ne
-        solver = None if self.c is not None else sun.ida.IDA(
+        with warnings.catch_warnings():  # "custom sparse Jacobian approximation will be
+            # ignored in favor of the user-defined jacfn": as intended
+            warnings.simplefilter("ignore", UserWarning)
+            solver = None if self.c is not None else sun.ida.IDA(
             resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
-            rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
-            first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)))
+                rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
+                first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)),
+                **self.ls_options)
         t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
         outs = _output_times(opts, t0)
         if t_stop < opts.t_end:

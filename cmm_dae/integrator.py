@@ -40,6 +40,8 @@ class RunOptions:
     branch: tuple[str, int] | None = None
     #: IDA: run each segment in C (:mod:`cmm_dae.csegment`) where a compiler is present
     compiled: bool = False
+    #: IDA's linear solver: "dense", "sparse" (SuperLU_MT on CasADi's pattern) or "auto"
+    linsolver: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -66,33 +68,51 @@ class SegmentEnd:
 
 
 class Recorder:
-    """Output samples (t, q, v, configuration index), appended in time order."""
+    """Output samples (t, q, v, configuration index), appended in time order.
+
+    Kept as blocks of copies: a segment's rows are never views into the integrator's own
+    output (which holds the multipliers too and would stay alive with them)."""
 
     def __init__(self) -> None:
-        self.t: list[float] = []
-        self.q: list[np.ndarray] = []
-        self.v: list[np.ndarray] = []
-        self.c: list[int] = []
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._single: list[tuple[float, np.ndarray, np.ndarray, int]] = []
+        self._n = 0
 
     def __len__(self) -> int:
-        return len(self.t)
+        return self._n
+
+    @property
+    def last_t(self) -> float:
+        """Time of the last sample, s."""
+        if self._single:
+            return self._single[-1][0]
+        return float(self._blocks[-1][0][-1])
 
     def add(self, t: float, q: np.ndarray, v: np.ndarray, c: int) -> None:
-        self.t.append(t)
-        self.q.append(np.array(q))
-        self.v.append(np.array(v))
-        self.c.append(c)
+        self._single.append((t, np.array(q, dtype=float), np.array(v, dtype=float), c))
+        self._n += 1
+
+    def _flush(self) -> None:
+        if self._single:
+            t, q, v, c = zip(*self._single, strict=True)
+            self._blocks.append((np.array(t, dtype=float), np.array(q), np.array(v),
+                                 np.array(c, dtype=int)))
+            self._single = []
 
     def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int) -> None:
-        self.t.extend(t.tolist())
-        self.q.extend(q)
-        self.v.extend(v)
-        self.c.extend([c] * t.size)
+        if t.size == 0:
+            return
+        self._flush()
+        self._blocks.append((np.array(t, dtype=float), np.array(q, dtype=float),
+                             np.array(v, dtype=float), np.full(t.size, c, dtype=int)))
+        self._n += t.size
 
     def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        n = len(self.t)
-        return (np.array(self.t), np.array(self.q).reshape(n, nq),
-                np.array(self.v).reshape(n, nq), np.array(self.c, int))
+        self._flush()
+        if not self._blocks:
+            return np.zeros(0), np.zeros((0, nq)), np.zeros((0, nq)), np.zeros(0, int)
+        return tuple(np.concatenate([b[i] for b in self._blocks]).reshape(
+            (self._n, nq) if i in (1, 2) else (self._n,)) for i in range(4))
 
 
 class Integrator(ABC):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import schur
 from .equations import Model
 from .errors import Status
 from .mechanism import GROUND
@@ -39,6 +40,14 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
         # (Phi_q M^-1 Phi_q^T - D) lam = Phi_q M^-1 Q - gamma, m x m instead of (nq + m)^2
         # (about 3x faster on the double-folded mechanism); an inactive lock row (zero in
         # Phi_q) reads -lam = 0. Point masses (zero inertia) need the whole KKT matrix.
+        st = schur.for_model(model)
+        if st is not None:  # large: a banded Schur complement sample by sample
+            try:
+                lam = schur.solve(st, Phi_q, model.mass, Qf, gamma, free)
+                a = (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass
+                return a, lam, Phi_q
+            except np.linalg.LinAlgError:
+                pass  # a singular sample: the whole matrix, sample by sample, below
         PM = Phi_q / model.mass
         S = PM @ Phi_q.transpose(0, 2, 1)
         d = np.arange(m)
@@ -83,6 +92,66 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
             np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
 
 
+#: most samples post-processed at a time (bounds the memory of the per-sample matrices)
+CHUNK = 2048
+#: bytes of Phi_q per chunk for a large model (its chunks are shorter)
+CHUNK_BYTES = 32 * 2**20
+
+
+def chunk_size(model: Model) -> int:
+    """Samples post-processed at a time: :data:`CHUNK`, or fewer (a power of two, at least
+    16) where a chunk's Phi_q would pass :data:`CHUNK_BYTES`."""
+    fit = CHUNK_BYTES // max(8 * model.m * model.nq, 1)
+    return int(min(CHUNK, max(16, 1 << max(int(fit).bit_length() - 1, 0))))
+
+
+def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray,
+             active: np.ndarray) -> dict[str, np.ndarray]:
+    """The per-sample series of one chunk of samples (see :func:`build_result`)."""
+    n = t.size
+    a, lam, Phi_q = batch_kkt(model, t, q, v, P)
+    c, cd, cdd, pts = (np.asarray(x).reshape(-1, n) for x in
+                       model.mapped("post_fn", n)(q.T, v.T, a.T, t))
+    extras = [np.asarray(x).reshape(-1, n).T
+              for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
+    phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
+    phi = np.asarray(phi_m[0]).reshape(-1, n).T
+    hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).reshape(-1, n).T
+    drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
+    drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
+
+    if model.dropped:  # redundant rows: the reactions shared out at minimum norm
+        lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
+    rows_all = model.all_rows
+    mech = model.mech
+
+    def rows_of(kind: str, name: str) -> list[int]:
+        return [i for i, r in enumerate(rows_all) if r.kind == kind and r.name == name]
+
+    nj = len(model.joint_names)
+    pts = pts.reshape(2, n, nj).transpose(1, 2, 0)
+    jforce = np.zeros((n, nj, 2))
+    jtorque = np.zeros((n, nj))
+    for k, (name, j) in enumerate(mech.joints.items()):
+        rows = rows_of("joint", name) + rows_of("lock", name)
+        G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
+        ref = pts[:, k, :]
+        if j.second_body != GROUND:
+            b = model.bidx[j.second_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = F
+            jtorque[:, k] = Mc - _cross(ref - q[:, 3 * b:3 * b + 2], F)
+        else:  # action = -reaction on the first body
+            b = model.bidx[j.first_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = -F
+            jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
+    return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce,
+            "jtorque": jtorque, "drift_pos": drift_pos, "drift_vel": drift_vel,
+            "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
+            "load_value": extras[3], "load_power": extras[4]}
+
+
 def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  config: np.ndarray, configurations: list[Configuration],
                  params: list[np.ndarray], events: list[Event], stats: Stats,
@@ -101,55 +170,42 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     P = np.array([params[c] for c in config]).reshape(n, -1)
     if model.callables:  # the callable loads' values at each sample
         P = np.array([model.fill(P[i], t[i], q[i], v[i]) for i in range(n)]).reshape(n, -1)
-    if n:
-        a, lam, Phi_q = batch_kkt(model, t, q, v, P)
-        c, cd, cdd, pts = (np.asarray(x).reshape(-1, n) for x in
-                           model.mapped("post_fn", n)(q.T, v.T, a.T, t))
-        extras = [np.asarray(x).reshape(-1, n).T
-                  for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
-        phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
-        phi = np.asarray(phi_m[0]).reshape(-1, n).T
-        hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).reshape(-1, n).T
-    else:
-        nj = len(model.joint_names)
-        a = np.zeros((0, model.nq))
-        lam = np.zeros((0, len(model.all_rows)))
-        Phi_q = np.zeros((0, len(model.all_rows), model.nq))
-        c = cd = cdd = np.zeros((nj, 0))
-        pts = np.zeros((2, 0))
-        phi = hvel = np.zeros((0, model.m))
-        ne, nld = len(model.element_names), len(model.load_names)
-        extras = [np.zeros((0, ne))] * 3 + [np.zeros((0, nld))] * 2
     free = np.array([model.free_rows(p) for p in params]).reshape(len(params), model.m)
     active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
-    drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
-    drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
+    # Sample by sample in chunks of CHUNK: the per-sample matrices (Phi_q, the Schur
+    # complements) of a long run would otherwise take many times the Result's own size.
+    size = chunk_size(model)
 
-    if model.dropped and n:  # redundant rows: the reactions shared out at minimum norm
-        lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
-    rows_all = model.all_rows
+    def chunk(i: int) -> dict[str, np.ndarray]:
+        k = min(size, n - i)
+        # padded (its last sample repeated) to a power of two: the mapped functions, which
+        # cost more to build than to run on a large model, are built for few sizes
+        width = size if k == size else max(8, 1 << (k - 1).bit_length())
+        idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+        out = _samples(model, t[idx], q[idx], v[idx], P[idx], active[idx])
+        return {key: val[:k] for key, val in out.items()}
+
+    ser: dict[str, np.ndarray] = {}
+    for i in range(0, n, size):  # filled in place: no second copy of the series
+        for key, val in chunk(i).items():
+            if key not in ser:
+                ser[key] = np.empty((n, *val.shape[1:]), dtype=val.dtype)
+            ser[key][i:i + val.shape[0]] = val
+    if not n:
+        nj, ne, nld = (len(model.joint_names), len(model.element_names),
+                       len(model.load_names))
+        ser = {"a": np.zeros((0, model.nq)), "lam": np.zeros((0, len(model.all_rows))),
+               "c": np.zeros((0, nj)), "cd": np.zeros((0, nj)), "cdd": np.zeros((0, nj)),
+               "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
+               "drift_pos": np.zeros(0), "drift_vel": np.zeros(0),
+               **{k: np.zeros((0, ne)) for k in ("elem_len", "elem_rate", "elem_tension")},
+               **{k: np.zeros((0, nld)) for k in ("load_value", "load_power")}}
+    lam = ser["lam"]
 
     def rows_of(kind: str, name: str) -> list[int]:
-        return [i for i, r in enumerate(rows_all) if r.kind == kind and r.name == name]
+        return [i for i, r in enumerate(model.all_rows) if r.kind == kind and r.name == name]
 
     nj = len(model.joint_names)
-    pts = pts.reshape(2, n, nj).transpose(1, 2, 0) if n else np.zeros((0, nj, 2))
-    jforce = np.zeros((n, nj, 2))
-    jtorque = np.zeros((n, nj))
-    for k, (name, j) in enumerate(mech.joints.items()):
-        rows = rows_of("joint", name) + rows_of("lock", name)
-        G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
-        ref = pts[:, k, :]
-        if j.second_body != GROUND:
-            b = model.bidx[j.second_body]
-            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
-            jforce[:, k] = F
-            jtorque[:, k] = Mc - _cross(ref - q[:, 3 * b:3 * b + 2], F)
-        else:  # action = -reaction on the first body
-            b = model.bidx[j.first_body]
-            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
-            jforce[:, k] = -F
-            jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
     # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
     # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
     friction = np.zeros((n, nj))
@@ -169,12 +225,13 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     for k, name in enumerate(model.driver_names):
         effort[:, k] = -lam[:, rows_of("driver", name)[0]]
 
-    data = {"t": t, "q": q, "v": v, "a": a, "lam": lam, "config": np.asarray(config, int),
-            "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce, "jtorque": jtorque,
-            "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel,
+    data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
+            "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],
+            "cdd": ser["cdd"], "jforce": ser["jforce"], "jtorque": ser["jtorque"],
+            "effort": effort, "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
             "friction": friction,
-            "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
-            "load_value": extras[3], "load_power": extras[4],
+            **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
+                                   "load_power")},
             "event_sample": (np.asarray(event_sample, int) if event_sample is not None
                              else np.zeros(0, int))}
     meta = {

@@ -36,6 +36,12 @@ SUNMatrix SUNDenseMatrix(sunindextype m, sunindextype n, SUNContext ctx);
 sunrealtype *SUNDenseMatrix_Data(SUNMatrix a);
 void SUNMatDestroy(SUNMatrix a);
 SUNLinearSolver SUNLinSol_Dense(N_Vector y, SUNMatrix a, SUNContext ctx);
+SUNMatrix SUNSparseMatrix(sunindextype m, sunindextype n, sunindextype nnz, int type,
+                          SUNContext ctx);
+sunrealtype *SUNSparseMatrix_Data(SUNMatrix a);
+sunindextype *SUNSparseMatrix_IndexValues(SUNMatrix a);
+sunindextype *SUNSparseMatrix_IndexPointers(SUNMatrix a);
+SUNLinearSolver SUNLinSol_SuperLUMT(N_Vector y, SUNMatrix a, int threads, SUNContext ctx);
 int SUNLinSolFree(SUNLinearSolver s);
 void *IDACreate(SUNContext ctx);
 int IDAInit(void *mem, IDAResFn res, sunrealtype t0, N_Vector y0, N_Vector yp0);
@@ -65,6 +71,7 @@ void IDAFree(void **mem);
 #define IDA_ONE_STEP 2
 #define IDA_TSTOP_RETURN 1
 #define IDA_ROOT_RETURN 2
+#define CSC_MAT 0
 /* returned by cmm_seg_run besides IDA's flags */
 #define SEG_MORE 100    /* the output buffer is full: call again */
 #define SEG_STALLED 101 /* the run's step budget is spent */
@@ -82,10 +89,13 @@ typedef struct {
 } Fn;
 
 typedef struct {
-    int N, ne;
+    int N, ne, ncol;            /* ncol: the leading entries of y recorded (q, v) */
     Fn res, jac, ev, evx;      /* evx: exact event values (KKT lock forces), may be absent */
     int has_evx, relaxed;
     double *p;                 /* the configuration's parameters (owned by the caller) */
+    int nnz, sparse;           /* the Jacobian's CSC pattern; sparse: SuperLU_MT, else */
+    const int *colptr, *rowind; /* the nonzeros are scattered into a dense matrix */
+    double *jbuf;
     double tbuf, cjbuf, near;
     long n_exact;
     /* IDA */
@@ -141,8 +151,25 @@ static int jacfn(sunrealtype t, sunrealtype cj, N_Vector y, N_Vector yp, N_Vecto
     s->jac.arg[2] = N_VGetArrayPointer(yp);
     s->jac.arg[3] = &s->cjbuf;
     s->jac.arg[4] = s->p;
-    s->jac.res[0] = SUNDenseMatrix_Data(J); /* column-major, as CasADi writes */
-    return s->jac.f(s->jac.arg, s->jac.res, s->jac.iw, s->jac.w, 0) ? -1 : 0;
+    if (s->sparse) { /* CasADi's nonzeros in CSC order, on its own pattern */
+        memcpy(SUNSparseMatrix_IndexPointers(J), s->colptr, sizeof(int) * (s->N + 1));
+        memcpy(SUNSparseMatrix_IndexValues(J), s->rowind, sizeof(int) * s->nnz);
+        s->jac.res[0] = SUNSparseMatrix_Data(J);
+        return s->jac.f(s->jac.arg, s->jac.res, s->jac.iw, s->jac.w, 0) ? -1 : 0;
+    }
+    /* dense: generated code for the nonzeros only (a densified Jacobian's C code takes
+     * minutes to compile), scattered into the column-major matrix */
+    {
+        double *data = SUNDenseMatrix_Data(J);
+        int j, k;
+        s->jac.res[0] = s->jbuf;
+        if (s->jac.f(s->jac.arg, s->jac.res, s->jac.iw, s->jac.w, 0)) return -1;
+        memset(data, 0, sizeof(double) * (size_t)s->N * s->N);
+        for (j = 0; j < s->N; j++)
+            for (k = s->colptr[j]; k < s->colptr[j + 1]; k++)
+                data[(size_t)j * s->N + s->rowind[k]] = s->jbuf[k];
+    }
+    return 0;
 }
 
 static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *ud) {
@@ -177,23 +204,28 @@ void cmm_seg_free(Seg *s) {
     if (s->ctx) SUNContext_Free(&s->ctx);
     fn_free(&s->res); fn_free(&s->jac); fn_free(&s->ev); fn_free(&s->evx);
     free(s->dir);
+    free(s->jbuf);
     free(s);
 }
 
 /* A new segment from (t0, y0, yp0). tout: the output times after t0 (its last entry is the
- * stop time); onestep: record IDA's own steps up to tout[nout - 1] instead. Returns NULL
- * when SUNDIALS cannot be set up (out of memory). */
+ * stop time); onestep: record IDA's own steps up to tout[nout - 1] instead. jac writes the
+ * Jacobian's nnz nonzeros of the CSC pattern (colptr, rowind); sparse: solved by SuperLU_MT
+ * on one thread, as scikit-sundae's "sparse", else by dense LU. Returns NULL when SUNDIALS
+ * cannot be set up (out of memory). */
 Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  cafun res, cawork res_w, cafun jac, cawork jac_w,
                  cafun ev, cawork ev_w, cafun evx, cawork evx_w, double *p,
                  double t0, const double *y0, const double *yp0, const double *atol,
                  double rtol, double first_step, long max_steps, long budget, int relaxed,
-                 const double *tout, int nout, int onestep) {
+                 const double *tout, int nout, int onestep,
+                 int nnz, const int *colptr, const int *rowind, int sparse) {
     Seg *s = calloc(1, sizeof(Seg));
     int i, ok = 1;
     if (s == NULL) return NULL;
     s->N = N;
     s->ne = ne;
+    s->ncol = nalg_from;
     s->p = p;
     s->relaxed = relaxed;
     s->has_evx = evx != NULL;
@@ -202,6 +234,10 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     s->onestep = onestep;
     s->tend = tout[nout - 1];
     s->budget = budget;
+    s->nnz = nnz;
+    s->sparse = sparse;
+    s->colptr = colptr;
+    s->rowind = rowind;
     if (fn_init(&s->res, res, res_w) || fn_init(&s->jac, jac, jac_w)
         || fn_init(&s->ev, ev, ev_w) || fn_init(&s->evx, evx, evx_w)) {
         cmm_seg_free(s);
@@ -219,8 +255,15 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     memcpy(N_VGetArrayPointer(s->yp), yp0, sizeof(double) * N);
     memcpy(N_VGetArrayPointer(s->atol), atol, sizeof(double) * N);
     for (i = 0; i < N; i++) N_VGetArrayPointer(s->id)[i] = i < nalg_from ? 1.0 : 0.0;
-    s->A = SUNDenseMatrix(N, N, s->ctx);
-    s->LS = s->A ? SUNLinSol_Dense(s->yy, s->A, s->ctx) : NULL;
+    s->jbuf = malloc(sizeof(double) * (nnz > 0 ? nnz : 1));
+    if (!s->jbuf) { cmm_seg_free(s); return NULL; }
+    if (sparse) {
+        s->A = SUNSparseMatrix(N, N, nnz, CSC_MAT, s->ctx);
+        s->LS = s->A ? SUNLinSol_SuperLUMT(s->yy, s->A, 1, s->ctx) : NULL;
+    } else {
+        s->A = SUNDenseMatrix(N, N, s->ctx);
+        s->LS = s->A ? SUNLinSol_Dense(s->yy, s->A, s->ctx) : NULL;
+    }
     s->mem = IDACreate(s->ctx);
     if (!s->A || !s->LS || !s->mem) { cmm_seg_free(s); return NULL; }
     /* the options and their order as scikit-sundae sets them (its defaults) */
@@ -249,7 +292,8 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     return s;
 }
 
-/* Advance, writing up to cap samples (t into T, y into Y row by row); *n gets how many.
+/* Advance, writing up to cap samples (t into T, the first ncol entries of y into Y row by
+ * row); *n gets how many.
  * Returns SEG_MORE when the buffer filled first, SEG_STALLED past the step budget, else
  * the final IDA flag (0 at the end, IDA_TSTOP_RETURN, IDA_ROOT_RETURN with the root
  * information in info[ne], or a negative failure flag, the last sample being where IDA
@@ -266,7 +310,7 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
         else
             flag = IDASolve(s->mem, s->tout[s->next], &tt, s->yy, s->yp, IDA_NORMAL);
         T[k] = tt;
-        memcpy(Y + (size_t)k * s->N, N_VGetArrayPointer(s->yy), sizeof(double) * s->N);
+        memcpy(Y + (size_t)k * s->ncol, N_VGetArrayPointer(s->yy), sizeof(double) * s->ncol);
         k++;
         if (flag == IDA_ROOT_RETURN) {
             IDAGetRootInfo(s->mem, info);

@@ -8,6 +8,10 @@ the same driving effort (1e-9 N m) and prints the ratio of the medians::
 
     python validation/before_after.py                       # against version 1 (1d28c89)
     python validation/before_after.py --before HEAD~3 --model models/nipper_swing.toml
+    python validation/before_after.py --before 695645f --compiled   # the speed work
+
+With ``--compiled`` the working tree is also timed with ``compiled=True`` (the C segment,
+built once into a temporary cache before the timed runs), as a third column.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 #: The last commit of version 1: before the run driver and event policy were rebuilt.
 VERSION_1 = "1d28c89"
+#: The last commit before the speed work (lean events, Schur post-processing, C segment).
+BEFORE_SPEED = "695645f"
 
 JOB = r"""
 import json, sys, time, gc
@@ -31,8 +37,9 @@ import numpy as np
 import cmm_dae as cd
 mech = cd.load(sys.argv[1])
 t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+kw = {"compiled": True} if sys.argv[5] == "1" else {}
 model = cd.Model(mech)
-run = lambda: cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2, model=model)
+run = lambda: cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2, model=model, **kw)
 res = run()
 best = float("inf")
 for _ in range(repeat):
@@ -58,12 +65,31 @@ def unpack(rev: str, where: Path) -> Path:
     return where
 
 
-def job(pythonpath: Path, model: Path, t_end: float, rtol: float, repeat: int) -> dict:
-    env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin"}
+def job(pythonpath: Path, model: Path, t_end: float, rtol: float, repeat: int,
+        compiled: bool = False, cache: str = "") -> dict:
+    env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin", "CMM_DAE_CACHE": cache}
     out = subprocess.run([sys.executable, "-c", JOB, str(model), str(t_end), str(rtol),
-                          str(repeat)], capture_output=True, text=True, env=env, check=True,
-                         cwd=pythonpath)
+                          str(repeat), "1" if compiled else "0"], capture_output=True,
+                         text=True, env=env, check=True, cwd=pythonpath)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def differences(b: dict, n: dict) -> tuple[bool, float, float]:
+    """Same event sequence?, largest event-time and driving-effort differences."""
+    import numpy as np
+
+    same_kinds = [e[:2] for e in b["events"]] == [e[:2] for e in n["events"]]
+    dt_ev = max((abs(x[2] - y[2]) for x, y in zip(b["events"], n["events"], strict=False)),
+                default=0.0)
+    tb, tn = np.array(b["t"]), np.array(n["t"])
+    if tb.shape == tn.shape and np.max(np.abs(tb - tn), initial=0.0) <= 1e-9:
+        # the same samples (an event's sample may move with its event time by round-off)
+        d_eff = float(np.max(np.abs(np.array(b["effort"]) - np.array(n["effort"])),
+                             initial=0.0))
+    else:
+        print(f"the sample times differ ({len(b['t'])} and {len(n['t'])} samples)")
+        d_eff = float("inf")
+    return same_kinds, dt_ev, d_eff
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,40 +100,41 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rtol", type=float, default=1e-8)
     ap.add_argument("--rounds", type=int, default=5, help="alternating subprocess pairs")
     ap.add_argument("--repeat", type=int, default=5, help="warm runs per subprocess")
+    ap.add_argument("--compiled", action="store_true",
+                    help="also time the working tree with compiled=True")
     a = ap.parse_args(argv)
     model = Path(a.model).resolve()
+    names = ["before", "after"] + (["compiled"] if a.compiled else [])
     with tempfile.TemporaryDirectory() as tmp:
         old = unpack(a.before, Path(tmp))
-        walls: dict[str, list[float]] = {"before": [], "after": []}
+        cache = str(Path(tmp) / "cache")
+        if a.compiled:  # build the C segment before any timed round
+            job(ROOT, model, 0.1, a.rtol, 0, True, cache)
+        walls: dict[str, list[float]] = {name: [] for name in names}
         last: dict[str, dict] = {}
         for _ in range(a.rounds):
-            for name, path in (("before", old), ("after", ROOT)):
-                r = job(path, model, a.t_end, a.rtol, a.repeat)
+            for name in names:
+                path = old if name == "before" else ROOT
+                r = job(path, model, a.t_end, a.rtol, a.repeat, name == "compiled", cache)
                 walls[name].append(r["wall"])
                 last[name] = r
-    b, n = last["before"], last["after"]
-    same_kinds = [e[:2] for e in b["events"]] == [e[:2] for e in n["events"]]
-    dt_ev = max((abs(x[2] - y[2]) for x, y in zip(b["events"], n["events"], strict=False)),
-                default=0.0)
-    import numpy as np
-
-    if b["t"] == n["t"]:  # same samples (event samples included): compare them one by one
-        d_eff = float(np.max(np.abs(np.array(b["effort"]) - np.array(n["effort"])),
-                             initial=0.0))
-    else:
-        print(f"the sample times differ ({len(b['t'])} and {len(n['t'])} samples)")
-        d_eff = float("inf")
-    mb, mn = statistics.median(walls["before"]), statistics.median(walls["after"])
+    med = {name: statistics.median(w) for name, w in walls.items()}
     print(f"model {model.name}, t_end {a.t_end} s, rtol {a.rtol:g}; {a.rounds} alternating "
           f"rounds, best of {a.repeat} warm runs each")
-    print(f"before ({a.before}): median {mb * 1e3:.2f} ms  "
-          f"[{', '.join(f'{w * 1e3:.1f}' for w in walls['before'])}]  steps {b['steps']}")
-    print(f"after  (working tree): median {mn * 1e3:.2f} ms  "
-          f"[{', '.join(f'{w * 1e3:.1f}' for w in walls['after'])}]  steps {n['steps']}")
-    print(f"ratio before/after: {mb / mn:.3f}")
-    print(f"same event sequence: {same_kinds}; largest event-time difference {dt_ev:.2e} s; "
-          f"largest driving-effort difference {d_eff:.2e}")
-    return 0 if same_kinds and dt_ev <= 1e-9 and d_eff <= 1e-9 else 1
+    label = {"before": f"before ({a.before})", "after": "after (working tree)",
+             "compiled": "after, compiled=True"}
+    ok = True
+    for name in names:
+        print(f"{label[name]:<24} median {med[name] * 1e3:8.2f} ms  "
+              f"[{', '.join(f'{w * 1e3:.1f}' for w in walls[name])}]  "
+              f"steps {last[name]['steps']}")
+    for name in names[1:]:
+        same, dt_ev, d_eff = differences(last["before"], last[name])
+        print(f"ratio before / {name}: {med['before'] / med[name]:.3f}; same event sequence: "
+              f"{same}; largest event-time difference {dt_ev:.2e} s; largest "
+              f"driving-effort difference {d_eff:.2e}")
+        ok = ok and same and dt_ev <= 1e-9 and d_eff <= 1e-9
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
