@@ -59,6 +59,9 @@ class Buffered:
             else:
                 a[:] = x
         self._call()
+        if self.buf.ret():  # a failed evaluation (a linear solve or a root-finder inside
+            # an MX function) leaves the outputs as they were: never return those
+            raise RuntimeError(f"the evaluation of CasADi function '{self.fn.name()}' failed")
         # CasADi stores column-major: a (r, c) matrix is the transpose of a (c, r) C-array
         return [o.reshape(c, r).T.copy() if c > 1 else o.copy()
                 for o, (r, c) in zip(self.outs, self.shapes, strict=True)]

@@ -166,12 +166,17 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from .bench import bench_models, table
+    from .bench import bench_models, chain_growth, chain_table, table
     from .library import examples_dir, model_path
 
+    if args.repeat < 1:
+        raise CmmError(f"--repeat must be at least 1, not {args.repeat}")
     paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,
-                             repeat=args.repeat)))
+                             repeat=args.repeat, compiled=not args.no_compiled)))
+    if args.chain:
+        print()
+        print(chain_table(*chain_growth(rtol=args.rtol, repeat=args.repeat)))
     return 0
 
 
@@ -302,6 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
     bn.add_argument("--dt", type=float, default=0.01, help="iterative step, s (0.01)")
     bn.add_argument("--repeat", type=int, default=3, help="warm repeats, best taken (3)")
+    bn.add_argument("--no-compiled", action="store_true",
+                    help="leave out the compiled segment (whose first build takes seconds)")
+    bn.add_argument("--chain", action="store_true",
+                    help="also time chains of 8, 16 and 32 four-bar loops (growth with size)")
     bn.set_defaults(func=_bench)
     return ap
 

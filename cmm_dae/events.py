@@ -98,20 +98,24 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
             out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint)
 
 
-def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float) -> list[Trigger]:
+def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
+              values: np.ndarray | None = None) -> list[Trigger]:
     """Triggers crossed at a state reached by a finite step (the fixed-step algorithm):
     those whose event function (:func:`event_values`, IDA's too) is negative there. A gap
     must be beyond its stop by more than round-off (a just-released joint sits a hair
-    beyond it); a joint that stayed locked at this very instant is not reported again."""
+    beyond it); a joint that stayed locked at this very instant is not reported again.
+    ``values``: the event functions of ``event_list(model, hs.locked)`` at (q, v, t), when
+    the caller has them already."""
     model = hs.model
     triggers = event_list(model, hs.locked)
     if not triggers:
         return []
-    c, cd = model.joint_rates(q, v)
-    needs_lam = any(tr.kind in ("push", "slip") for tr in triggers)
-    lam = model.kkt(q, v, t, hs.p)[1] if needs_lam else None
-    values = np.empty(len(triggers))
-    event_values(hs, c, cd, lam, triggers, values)
+    if values is None:
+        c, cd = model.joint_rates(q, v)
+        needs_lam = any(tr.kind in ("push", "slip") for tr in triggers)
+        lam = model.kkt(q, v, t, hs.p)[1] if needs_lam else None
+        values = np.empty(len(triggers))
+        event_values(hs, c, cd, lam, triggers, values)
     out = []
     for tr, val in zip(triggers, values, strict=True):
         if tr.kind == "gap":

@@ -16,9 +16,13 @@ impact map, lock, release, Zeno rule with the step as the time resolution). The 
 
 from __future__ import annotations
 
+import math
+
+import casadi as ca
 import numpy as np
 
 from . import events as ev
+from .buffers import Buffered
 from .equations import Model
 from .errors import SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
@@ -94,6 +98,60 @@ class _Stepper:
         return np.linalg.solve(J, rhs)
 
 
+class _CompiledStep:
+    """One whole step of a configuration (steps 1-4 above, and the event functions at its
+    end) as one CasADi function: the same equations, Newton iteration and tolerances as
+    :class:`_Stepper`, evaluated in one call instead of a dozen (the Python stepper stays
+    for Python load laws, which CasADi cannot call, and for the dead-point message)."""
+
+    def __init__(self, model: Model, hs: ev.HybridState, coords: list[str],
+                 triggers: list[ev.Trigger]):
+        nq, m = model.nq, model.m
+        kidx = [model.jidx[n] for n in coords]
+        act = [int(i) for i in model.active_rows(hs.p)]
+        q, v, a = (ca.MX.sym(n, nq) for n in ("q", "v", "a"))
+        t, tn = ca.MX.sym("t"), ca.MX.sym("tn")
+        p = ca.MX.sym("p", model.n_params)
+        h = tn - t
+
+        def rows(x, idx):  # x[idx] (rows), with an empty selection an empty column
+            return x[idx, :] if idx else ca.MX(0, x.shape[1])
+
+        c, cd, cdd, _ = model.post_fn(q, v, a, t)
+        targets = rows(c, kidx) + rows(cd, kidx) * h  # the previous instant's rates
+        rates = rows(cd, kidx) + rows(cdd, kidx) * h
+        z, zt, zp = ca.MX.sym("z", nq), ca.MX.sym("zt"), ca.MX.sym("zp", model.n_params)
+        ztar = ca.MX.sym("ztar", len(kidx))
+        phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(z, zt, zp)
+        G = ca.Function("g", [z, zt, zp, ztar], [ca.vertcat(rows(phi, act),
+                                                          rows(cz, kidx) - ztar)])
+        # Newton to max |r| < 1e-13 in at most 25 iterations, as _Stepper.positions
+        newton = ca.rootfinder("pos", "newton", G, {
+            "abstol": 1e-13, "abstolStep": 0.0, "max_iter": 25, "error_on_fail": False})
+        q1 = newton(q + v * h, tn, p, targets)
+        r = ca.mmax(ca.fabs(G(q1, tn, p, targets)))
+        _, Pq1, Pt1, _, cq1 = model.kin_fn(q1, tn, p)
+        v1 = ca.solve(ca.vertcat(rows(Pq1, act), rows(cq1, kidx)),
+                      ca.vertcat(-rows(Pt1, act), rates), "qr")
+        Phi_k, Qf, gamma = model.kkt_fn(q1, v1, tn, p)
+        K = ca.blockcat([[ca.diag(ca.DM(model.mass)), Phi_k.T],
+                         [Phi_k, ca.diag(model.free_fn(p))]])
+        sol = ca.solve(K, ca.vertcat(Qf, gamma), "qr")
+        c1, cd1 = model.cvel_fn(q1, v1)
+        vals: list = [None] * len(triggers)
+        ev.event_values(hs, c1, cd1, sol[nq:nq + m], triggers, vals, where=ca.if_else)
+        self.fn = Buffered(ca.Function("step", [q, v, a, t, tn, p], [
+            q1, v1, sol[:nq], r, ca.vertcat(0.0, *vals)]))
+
+    def __call__(self, q, v, a, t, tn, p):
+        """(q, v, a) at ``tn``, the position residual and the event values."""
+        try:
+            q1, v1, a1, r, vals = self.fn(q, v, a, t, tn, p)
+        except RuntimeError:  # a singular matrix inside (a dead point): the Python stepper
+            return q, v, a, math.inf, None  # takes the step and says what happened
+        return q1, v1, a1, float(r[0]), vals[1:]
+
+
 class IterativeIntegrator(Integrator):
     """The paper's fixed-step algorithm, step ``dt``, output every ``output_every`` steps."""
 
@@ -114,6 +172,7 @@ class IterativeIntegrator(Integrator):
         self.coords: list[str] = []
         self.key: tuple | None = None
         self.st: _Stepper | None = None
+        self._steps: dict[tuple, _CompiledStep] = {}
 
     def after_singular(self, t: float) -> None:
         # go on from the grid point before t: the next step ends on the grid again
@@ -128,37 +187,56 @@ class IterativeIntegrator(Integrator):
             self.key = key
         st, k = self.st, self.st.kidx
         cfg = hs.current()
+        fast = self._compiled_step()
+        p = hs.p
         t = t0
-        a, _, _ = model.kkt(q, v, t, hs.p)
+        a, _, _ = model.kkt(q, v, t, p)
         while self.n < self.n_steps:
             self.n += 1
             t_new = min(self.n * opts.dt, opts.t_end)
             h = t_new - t
-            c, cd = model.joint_rates(q, v)
-            cdd = model.joint_accelerations(q, v, a, t)
-            targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
-            rates = cd[k] + cdd[k] * h
-            try:
-                q_new = st.positions(q + v * h, t_new, targets)
-            except SolverError as e:
-                if e.status is not Status.DEAD_POINT:
-                    raise
-                self.n -= 1  # the step is not taken: the policy crosses from (t, q, v)
-                return SegmentEnd(t, q, v, (), "singular")
-            q = q_new
-            v = st.velocities(q, t_new, rates)
+            values = None
+            if fast is not None:
+                q_new, v_new, a_new, resid, values = fast(q, v, a, t, t_new, p)
+            if fast is None or not resid < 1e-9:
+                c, cd = model.joint_rates(q, v)
+                cdd = model.joint_accelerations(q, v, a, t)
+                targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
+                rates = cd[k] + cdd[k] * h
+                try:  # (also where the compiled Newton failed: the dead-point report)
+                    q_new = st.positions(q + v * h, t_new, targets)
+                except SolverError as e:
+                    if e.status is not Status.DEAD_POINT:
+                        raise
+                    self.n -= 1  # the step is not taken: the policy crosses from (t, q, v)
+                    return SegmentEnd(t, q, v, (), "singular")
+                v_new, a_new, values = st.velocities(q_new, t_new, rates), None, None
+            q, v = q_new, v_new
             t = t_new
             self.stats.steps += 1
             if opts.progress is not None:
                 opts.progress.update(t)
-            crossed = ev.crossings(hs, q, v, t)
+            crossed = ev.crossings(hs, q, v, t, values)
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch
                 return SegmentEnd(t, q, v, tuple(crossed), "event")
-            a, _, _ = model.kkt(q, v, t, hs.p)
+            a = a_new if a_new is not None else model.kkt(q, v, t, p)[0]
             if self.n % opts.output_every == 0 or self.n == self.n_steps:
                 rec.add(t, q, v, cfg)
         return SegmentEnd(t, q, v, (), "end")
+
+
+    def _compiled_step(self) -> _CompiledStep | None:
+        """The configuration's compiled step (cached), None with Python load laws."""
+        model, hs = self.model, self.hs
+        if model.callables:
+            return None
+        triggers = ev.event_list(model, hs.locked)
+        key = (tuple(self.coords), tuple(triggers), hs._mode(hs.locked, None, None))
+        got = self._steps.get(key)
+        if got is None:
+            got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)
+        return got
 
 
 def steps_needed(t_end: float, dt: float) -> int:

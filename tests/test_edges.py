@@ -321,14 +321,14 @@ def test_iterative_ctrl_c_keeps_the_partial_result(monkeypatch):
     import cmm_dae.iterative as it
 
     mech = cd.load(MODELS / "double_folded.toml")
-    orig = it._Stepper.positions
+    orig = it._CompiledStep.__call__
 
-    def positions(self, q0, t, targets):
-        if t > 4.0:
+    def step(self, q, v, a, t, tn, p):  # Ctrl-C in the middle of the step to t = 4.01 s
+        if tn > 4.0:
             raise KeyboardInterrupt
-        return orig(self, q0, t, targets)
+        return orig(self, q, v, a, t, tn, p)
 
-    monkeypatch.setattr(it._Stepper, "positions", positions)
+    monkeypatch.setattr(it._CompiledStep, "__call__", step)
     with pytest.raises(cd.SolverError, match="interrupted") as info:
         cd.run_iterative(mech, 10.0)
     part = info.value.result

@@ -1,0 +1,117 @@
+"""The faster paths give the numbers of the plain ones.
+
+- IDA's event function built symbolically from the policy's ``event_values``, with lock
+  forces read from IDA's multipliers away from their threshold, against the KKT value at
+  every evaluation (the version before the change);
+- the sparse linear solver against the dense one on a chain of four-bar loops;
+- the banded Schur complement of large mechanisms against the dense KKT solve;
+- the iterative algorithm's compiled step against its Python stepper.
+Tolerances are stated at each assertion.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+from cmm_dae import ida, iterative, post, schur
+from cmm_dae.errors import ModelError
+from cmm_dae.library import four_bar_chain
+
+
+def test_lean_lock_force_events_locate_the_same_roots(monkeypatch):
+    """Lock and release of the double-folded mechanism: with the KKT solve at every event
+    evaluation (PUSH_MARGIN huge) the same event times to 1e-12 s."""
+    mech = cd.load(cd.example("double_folded"))
+    model = cd.Model(mech)
+    lean = cd.run_dae(mech, 10.0, model=model)
+    calls = []
+    exact = ida.IdaIntegrator._exact_events
+
+    def counting(self, *a):
+        calls.append(1)
+        return exact(self, *a)
+
+    monkeypatch.setattr(ida.IdaIntegrator, "_exact_events", counting)
+    monkeypatch.setattr(ida, "PUSH_MARGIN", 1e300)
+    full = cd.run_dae(mech, 10.0, model=model)
+    assert [(e.kind, e.joint) for e in lean.events] == [(e.kind, e.joint) for e in full.events]
+    assert max(abs(a.t - b.t) for a, b in zip(lean.events, full.events, strict=True)) <= 1e-12
+    assert np.max(np.abs(lean.driver("A").effort - full.driver("A").effort)) <= 1e-9
+    # while locked, every evaluation solved the KKT system in the reference run
+    assert len(calls) > 500
+
+
+def test_sparse_linear_solver_matches_dense():
+    """Chain of 6 loops (74 unknowns): sparse LU (SuperLU_MT) vs dense LU, rtol 1e-10:
+    positions agree to 1e-8 m (the two take slightly different steps)."""
+    mech = four_bar_chain(6)
+    model = cd.Model(mech)
+    dense = cd.run_dae(mech, 0.5, model=model, rtol=1e-10, atol=1e-12, linsolver="dense")
+    sparse = cd.run_dae(mech, 0.5, model=model, rtol=1e-10, atol=1e-12, linsolver="sparse")
+    assert sparse.success and dense.success
+    assert np.max(np.abs(sparse.data["q"] - dense.data["q"])) <= 1e-8
+    assert np.max(np.abs(sparse.data["lam"] - dense.data["lam"])) <= 1e-6 * np.max(
+        np.abs(dense.data["lam"]))
+
+
+def test_bad_linsolver_is_a_model_error():
+    with pytest.raises(ModelError, match="linsolver must be"):
+        cd.run_dae(cd.load(cd.example("pendulum_stop")), 0.1, linsolver="superlu")
+
+
+def test_banded_schur_complement_solves_the_kkt_system():
+    """Chain of 24 loops (146 rows): the banded path is taken and its multipliers satisfy
+    the whole KKT system to round-off (relative residual 1e-12); they equal the dense
+    Schur complement's to 1e-10 relative."""
+    mech = four_bar_chain(24)
+    model = cd.Model(mech)
+    st = schur.for_model(model)
+    assert st is not None and st.bw <= 0.125 * model.m
+    res = cd.run_dae(mech, 0.05, model=model)
+    t, q, v = res.t, res.data["q"], res.data["v"]
+    P = np.tile(model.params(), (t.size, 1))
+    a, lam, Phi_q = post.batch_kkt(model, t, q, v, P)
+    for i in (0, t.size // 2, t.size - 1):
+        Pq, Qf, gamma = (np.asarray(x) for x in model.kkt_fn(q[i], v[i], t[i], P[i]))
+        Qf, gamma = Qf.ravel(), gamma.ravel()
+        r1 = model.mass * a[i] + Pq.T @ lam[i] - Qf
+        r2 = Pq @ a[i] - gamma
+        assert np.max(np.abs(r1)) <= 1e-12 * np.max(np.abs(Qf))
+        assert np.max(np.abs(r2)) <= 1e-12 * max(np.max(np.abs(gamma)), 1.0)
+    saved = schur._cache[model]
+    schur._cache[model] = None  # force the dense Schur complement
+    try:
+        _, lam_d, _ = post.batch_kkt(model, t, q, v, P)
+    finally:
+        schur._cache[model] = saved
+    assert np.max(np.abs(lam - lam_d)) <= 1e-10 * np.max(np.abs(lam_d))
+
+
+@pytest.mark.parametrize("name,t_end", [("double_folded", 10.0), ("stick_slip_block", 3.0),
+                                        ("pendulum_stop", 2.0), ("nipper_cutting", 2.0)])
+def test_iterative_compiled_step_matches_python_stepper(name, t_end, monkeypatch):
+    """Same events at the same grid times, states to 1e-12, forces to 1e-9 relative."""
+    mech = cd.load(cd.example(name))
+    model = cd.Model(mech)
+    fast = cd.run_iterative(mech, t_end, dt=1e-3, model=model)
+    monkeypatch.setattr(iterative.IterativeIntegrator, "_compiled_step", lambda self: None)
+    slow = cd.run_iterative(mech, t_end, dt=1e-3, model=model)
+    assert [(e.kind, e.joint, e.t) for e in fast.events] == [
+        (e.kind, e.joint, e.t) for e in slow.events]
+    assert np.max(np.abs(fast.data["q"] - slow.data["q"])) <= 1e-12
+    assert np.max(np.abs(fast.data["lam"] - slow.data["lam"])) <= 1e-9 * max(
+        np.max(np.abs(slow.data["lam"])), 1.0)
+
+
+def test_bench_cli_reports_ratios(capsys):
+    from cmm_dae.cli import main
+
+    assert main(["bench", "pendulum_stop", "--t-end", "0.2", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.startswith("pendulum_stop")]
+    methods = [" ".join(r[1:3]) if r[2] == "compiled" else r[1] for r in rows]
+    assert methods[0] == "IDA" and methods[-1] == "iterative"
+    assert float(rows[0][6]) == 1.0  # IDA against itself
+    assert main(["bench", "pendulum_stop", "--repeat", "0"]) == 2
