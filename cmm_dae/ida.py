@@ -26,6 +26,7 @@ from . import events as ev
 from .equations import Buffered, Model
 from .errors import CmmError, SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
+from .kinematics import singular_ratio
 from .result import Stats
 
 #: Absolute tolerances on the multipliers. Both are index-2 variables of the GGL form and
@@ -249,7 +250,7 @@ class IdaIntegrator(Integrator):
         q = ev.project_positions(model, q, t0, self.p)
         v = ev.project_velocities(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
-        self.ratio0 = ev.dependent_rows(model, q, t0, self.p, tol=1.0)[1]
+        self.ratio0 = singular_ratio(model, q, t0, self.p)
         y0 = np.concatenate([q, v, lam, np.zeros(model.m)])
         yp0 = np.concatenate([v, a, np.zeros(2 * model.m)])
         ne = 1 + len(self.triggers)
@@ -392,7 +393,7 @@ class IdaIntegrator(Integrator):
         failure (a singular position ahead, not only a badly conditioned stretch)."""
         v = self.v_fail
         h = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
-        return ev.dependent_rows(self.model, q + v * h, tt + h, self.p, tol=1.0)[1] < ratio
+        return singular_ratio(self.model, q + v * h, tt + h, self.p) < ratio
 
     def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status]:
         cfg = self.hs.configurations[self.hs.current()].label

@@ -38,8 +38,12 @@ import cmm_dae as cd
 mech = cd.load(sys.argv[1])
 t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 kw = {"compiled": True} if sys.argv[5] == "1" else {}
+method = sys.argv[6] if len(sys.argv) > 6 else "ida"
 model = cd.Model(mech)
-run = lambda: cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2, model=model, **kw)
+if method == "ida":
+    run = lambda: cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2, model=model, **kw)
+else:  # the iterative algorithm at dt = rtol (pass --rtol 1e-3 for dt 1e-3)
+    run = lambda: cd.run_iterative(mech, t_end, dt=rtol, model=model)
 res = run()
 best = float("inf")
 for _ in range(repeat):
@@ -66,11 +70,13 @@ def unpack(rev: str, where: Path) -> Path:
 
 
 def job(pythonpath: Path, model: Path, t_end: float, rtol: float, repeat: int,
-        compiled: bool = False, cache: str = "") -> dict:
+        compiled: bool = False, cache: str = "", method: str = "ida") -> dict:
+    """One subprocess timing ``repeat`` warm runs of the package at ``pythonpath``
+    (``method="iterative"`` runs the iterative algorithm with dt = ``rtol``)."""
     env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin", "CMM_DAE_CACHE": cache}
     out = subprocess.run([sys.executable, "-c", JOB, str(model), str(t_end), str(rtol),
-                          str(repeat), "1" if compiled else "0"], capture_output=True,
-                         text=True, env=env, check=True, cwd=pythonpath)
+                          str(repeat), "1" if compiled else "0", method],
+                         capture_output=True, text=True, env=env, check=True, cwd=pythonpath)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

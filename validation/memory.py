@@ -1,8 +1,9 @@
 """Peak memory of a long run against the size of its Result's own arrays.
 
 Each case runs in a fresh subprocess: the baseline is the resident set after importing the
-package, building the model and a 0.1-s warm-up run; the peak is the process's maximum
-resident set after the long run (``ru_maxrss``). Reported: the peak's growth over the
+package, building the model and a 0.1-s warm-up run; the peak is the process's high-water
+resident set after the long run (``VmHWM``, reset to the baseline before the run where
+Linux allows; ``ru_maxrss`` elsewhere). Reported: the peak's growth over the
 baseline divided by the bytes of the Result's arrays (``Result.data``)::
 
     python validation/memory.py                      # double-folded, 1000 s, both paths
@@ -22,13 +23,27 @@ ROOT = Path(__file__).resolve().parent.parent
 JOB = r"""
 import json, resource, sys
 import cmm_dae as cd
+
+def rss_peak():  # bytes; Linux: this process image's own high-water mark (ru_maxrss also
+    try:         # carries the parent's size across fork + exec)
+        for line in open("/proc/self/status"):
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
 mech = cd.load(sys.argv[1])
 t_end, compiled = float(sys.argv[2]), sys.argv[3] == "1"
 model = cd.Model(mech)
 cd.run_dae(mech, 0.1, model=model, compiled=compiled)
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+try:  # the high-water mark back to the current size: the peak is the run's own
+    open("/proc/self/clear_refs", "w").write("5")
+except OSError:
+    pass
+base = rss_peak()
 res = cd.run_dae(mech, t_end, model=model, compiled=compiled)
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = rss_peak()
 arrays = sum(a.nbytes for a in res.data.values())
 print(json.dumps({"base": base, "peak": peak, "arrays": arrays, "n": int(res.t.size)}))
 """
