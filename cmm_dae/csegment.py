@@ -18,6 +18,8 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import subprocess
+import warnings
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -223,7 +225,8 @@ class CompiledModel:
             int(stats[0]), interrupted or stalled, stalled)
 
 
-_models = None  # model -> CompiledModel (weak keys), made on first use
+#: model -> {sparse: CompiledModel or None (its build failed)}, weak in the model
+_models: weakref.WeakKeyDictionary | None = None
 _warned = False
 
 
@@ -231,9 +234,6 @@ def for_model(model, sparse: bool = False) -> CompiledModel | None:
     """The compiled segment of ``model`` (built on first use, kept with the model), or None
     with a warning (once per process) when it cannot be used: no working C compiler, no
     SUNDIALS libraries from scikit-sundae, or load laws given as Python callables."""
-    import warnings
-    import weakref
-
     global _models, _warned
     why = available()
     if why is None and model.callables:
@@ -248,5 +248,10 @@ def for_model(model, sparse: bool = False) -> CompiledModel | None:
         _models = weakref.WeakKeyDictionary()
     per_model = _models.setdefault(model, {})
     if sparse not in per_model:
-        per_model[sparse] = CompiledModel(model, sparse)
+        try:
+            per_model[sparse] = CompiledModel(model, sparse)
+        except (OSError, subprocess.SubprocessError, RuntimeError) as e:
+            warnings.warn(f"compiled segment not used (building this model failed: {e}): "
+                          "running the Python path", stacklevel=4)
+            per_model[sparse] = None
     return per_model[sparse]

@@ -278,6 +278,11 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
                        stats, status, message, np.array(after, int))
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
+    # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
+    # falls back to the Python path where it cannot be built)
+    res.meta["linsolver"] = (("sparse" if integ.sparse else "dense")
+                             if hasattr(integ, "sparse") else None)
+    res.meta["compiled"] = getattr(integ, "c", None) is not None
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if err is not None and throw:
         raise SolverError(message, status=status, result=res,

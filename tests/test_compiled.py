@@ -55,6 +55,7 @@ def test_same_result_as_python_path(name, t_end, what):
     py = cd.run_dae(mech, t_end, model=model)
     c = cd.run_dae(mech, t_end, model=model, compiled=True)
     assert c.status is Status.SUCCESS and len(c.events) == len(py.events)
+    assert c.meta["compiled"] and not py.meta["compiled"]  # it ran in C, not a fallback
     kind, obj = what
     if kind == "driver":
         obj = obj or py.meta["drivers"][0]
@@ -78,6 +79,7 @@ def test_internal_steps_and_table_driver():
     py = cd.run_dae(mech, 1.5, model=model, output_dt=None)
     c = cd.run_dae(mech, 1.5, model=model, output_dt=None, compiled=True)
     assert np.any(np.isclose(py.t, 1.0, rtol=0, atol=1e-12))  # the restart is a sample
+    assert c.meta["compiled"]
     _same(py, c, {"A": (py.joint("A").position, c.joint("A").position),
                   "torque": (py.driver("A").effort, c.driver("A").effort)})
 
@@ -102,6 +104,7 @@ def test_clean_fallback_without_compiler(tmp_path):
             a = cd.run_dae(mech, 1.0, compiled=True)
             b = cd.run_dae(mech, 1.0, compiled=True)
         print(len(w), str(w[0].message))
+        print(a.meta["compiled"], b.meta["compiled"])
         print(a.events[0].t == cd.run_dae(mech, 1.0).events[0].t, b.events[0].t == a.events[0].t)
     """)
     env = dict(os.environ, CC=str(tmp_path / "no-such-compiler"),
@@ -111,4 +114,5 @@ def test_clean_fallback_without_compiler(tmp_path):
     out = [line for line in out if line and not line.startswith("[IDA")]
     assert out[0].startswith("1 compiled segment not used")
     assert "no-such-compiler" in out[0] or "compiler" in out[0]
-    assert out[1] == "True True"
+    assert out[1] == "False False"  # the Python path ran
+    assert out[2] == "True True"
