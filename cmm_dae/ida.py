@@ -80,10 +80,15 @@ class IdaIntegrator(Integrator):
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)
         self.p = np.zeros(model.n_params)
+        # IDA's arrays are copied into these (bound once) rather than bound at every
+        # callback: a copy costs a third of a bind
+        self.y_in, self.yp_in, self.res_out = (np.zeros(model.N) for _ in range(3))
         self.res = Buffered(model.res_fn)
-        self.res.bind(0, self.t_arr)
-        self.res.bind(3, self.p)
+        for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.p)):
+            self.res.bind(i, arr)
+        self.res.bind_out(0, self.res_out)
         self.jac: Buffered | None = None
+        self._jj: np.ndarray | None = None  # the Jacobian array the function writes into
         # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
         # derivatives outside it, so they keep the dense one
         self.sparse = not model.callables and (
@@ -117,27 +122,28 @@ class IdaIntegrator(Integrator):
             nq = self.model.nq
             self.p[:] = self.model.fill(self.p, t, y[:nq], y[nq:2 * nq])
         self.t_arr[0] = t
-        self.res.bind(1, y)
-        self.res.bind(2, yp)
-        self.res.bind_out(0, res)
+        self.y_in[:] = y
+        self.yp_in[:] = yp
         self.res.run()
+        res[:] = self.res_out
 
     def _jacobian(self, t, y, yp, res, cj, JJ):
         if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
             self.jac = (Buffered(self.model.jac_sparse_fn, sparse=True) if self.sparse
                         else Buffered(self.model.jac_fn))
-            self.jac.bind(0, self.t_arr)
-            self.jac.bind(3, self.cj_arr)
-            self.jac.bind(4, self.p)
+            for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.cj_arr, self.p)):
+                self.jac.bind(i, arr)
         self.t_arr[0] = t
         self.cj_arr[0] = cj
-        self.jac.bind(1, y)
-        self.jac.bind(2, yp)
+        self.y_in[:] = y
+        self.yp_in[:] = yp
         model = self.model
         if model.callables:
             nq = model.nq
             self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
-        self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
+        if JJ is not self._jj:  # one array per solver: bound once per segment
+            self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
+            self._jj = JJ
         self.jac.run()
         if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
             dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
@@ -157,9 +163,8 @@ class IdaIntegrator(Integrator):
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
         if not self.triggers:
             return
-        ef = self.ev_fn
-        ef.bind(0, y)
-        ef.run()
+        self.y_in[:] = y
+        self.ev_fn.run()
         if self.has_push and (self.relaxed or self.ev_near[0] < 0.0):
             # Lock forces: the event function reads IDA's own multipliers, which are in the
             # error test and tell a force's sign while it is far from its threshold; near
@@ -239,6 +244,7 @@ class IdaIntegrator(Integrator):
         self.ev_out = np.zeros(1 + len(self.triggers))  # [always positive, triggers]
         self.ev_near = np.zeros(1)
         self.ev_fn = self._event_function()
+        self.ev_fn.bind(0, self.y_in)
         self.ev_fn.bind_out(0, self.ev_out)
         self.ev_fn.bind_out(1, self.ev_near)
         self.n_steps = 0
