@@ -99,15 +99,17 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
 
 
 def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
-              values: np.ndarray | None = None) -> list[Trigger]:
+              values: np.ndarray | None = None,
+              triggers: list[Trigger] | None = None) -> list[Trigger]:
     """Triggers crossed at a state reached by a finite step (the fixed-step algorithm):
     those whose event function (:func:`event_values`, IDA's too) is negative there. A gap
     must be beyond its stop by more than round-off (a just-released joint sits a hair
     beyond it); a joint that stayed locked at this very instant is not reported again.
-    ``values``: the event functions of ``event_list(model, hs.locked)`` at (q, v, t), when
-    the caller has them already."""
+    ``values``: the event functions of ``triggers`` (default ``event_list(model,
+    hs.locked)``) at (q, v, t), when the caller has them already."""
     model = hs.model
-    triggers = event_list(model, hs.locked)
+    if triggers is None:
+        triggers = event_list(model, hs.locked)
     if not triggers:
         return []
     if values is None:

@@ -106,42 +106,62 @@ class _CompiledStep:
 
     def __init__(self, model: Model, hs: ev.HybridState, coords: list[str],
                  triggers: list[ev.Trigger]):
-        nq, m = model.nq, model.m
+        nq, m, npar = model.nq, model.m, model.n_params
         kidx = [model.jidx[n] for n in coords]
         act = [int(i) for i in model.active_rows(hs.p)]
-        q, v, a = (ca.MX.sym(n, nq) for n in ("q", "v", "a"))
-        t, tn = ca.MX.sym("t"), ca.MX.sym("tn")
-        p = ca.MX.sym("p", model.n_params)
-        h = tn - t
+        nk = len(kidx)
+        schur = bool(np.all(model.mass > 0.0) and m > 0)
 
         def rows(x, idx):  # x[idx] (rows), with an empty selection an empty column
-            return x[idx, :] if idx else ca.MX(0, x.shape[1])
+            return x[idx, :] if idx else type(x)(0, x.shape[1])
 
+        # Everything but the Newton iteration and the two linear solves is SX, in four
+        # functions: MX evaluates node by node, and the step costs a third as much so.
+        S = ca.SX.sym
+        q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
+        h = tn - t
         c, cd, cdd, _ = model.post_fn(q, v, a, t)
-        targets = rows(c, kidx) + rows(cd, kidx) * h  # the previous instant's rates
-        rates = rows(cd, kidx) + rows(cdd, kidx) * h
-        z, zt, zp = ca.MX.sym("z", nq), ca.MX.sym("zt"), ca.MX.sym("zp", model.n_params)
-        ztar = ca.MX.sym("ztar", len(kidx))
-        phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(z, zt, zp)
-        G = ca.Function("g", [z, zt, zp, ztar], [ca.vertcat(rows(phi, act),
-                                                          rows(cz, kidx) - ztar)])
+        pre = ca.Function("pre", [q, v, a, t, tn], [
+            q + v * h, rows(c, kidx) + rows(cd, kidx) * h,  # the previous instant's rates
+            rows(cd, kidx) + rows(cdd, kidx) * h])
+        tar = S("tar", nk)
+        phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
+        G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act),
+                                                         rows(cz, kidx) - tar)])
+        rates = S("rates", nk)
+        vel = ca.Function("vel", [q, tn, p, tar, rates], [
+            ca.mmax(ca.fabs(G(q, tn, p, tar))), ca.vertcat(rows(Phi_q, act), rows(c_q, kidx)),
+            ca.vertcat(-rows(Phi_t, act), rates)])
+        Phi_k, Qf, gamma = model.kkt_fn(q, v, tn, p)
+        if schur:  # the Schur complement on the diagonal mass matrix (as the outputs)
+            PM = Phi_k @ ca.diag(ca.DM(1.0 / model.mass))
+            kkt = ca.Function("kkt", [q, v, tn, p], [
+                PM @ Phi_k.T - ca.diag(model.free_fn(p)), PM @ Qf - gamma])
+        else:  # point masses: the whole KKT matrix
+            kkt = ca.Function("kkt", [q, v, tn, p], [
+                ca.blockcat([[ca.diag(ca.DM(model.mass)), Phi_k.T],
+                             [Phi_k, ca.diag(model.free_fn(p))]]), ca.vertcat(Qf, gamma)])
+        sol = S("sol", m if schur else nq + m)
+        lam = sol if schur else sol[nq:nq + m]
+        acc = (Qf - Phi_k.T @ sol) / ca.DM(model.mass) if schur else sol[:nq]
+        c1, cd1 = model.cvel_fn(q, v)
+        vals: list = [None] * len(triggers)
+        ev.event_values(hs, c1, cd1, lam, triggers, vals, where=ca.if_else)
+        fin = ca.Function("fin", [q, v, tn, p, sol], [acc, ca.vertcat(0.0, *vals)])
+
         # Newton to max |r| < 1e-13 in at most 25 iterations, as _Stepper.positions
         newton = ca.rootfinder("pos", "newton", G, {
-            "abstol": 1e-13, "abstolStep": 0.0, "max_iter": 25, "error_on_fail": False})
-        q1 = newton(q + v * h, tn, p, targets)
-        r = ca.mmax(ca.fabs(G(q1, tn, p, targets)))
-        _, Pq1, Pt1, _, cq1 = model.kin_fn(q1, tn, p)
-        v1 = ca.solve(ca.vertcat(rows(Pq1, act), rows(cq1, kidx)),
-                      ca.vertcat(-rows(Pt1, act), rates), "qr")
-        Phi_k, Qf, gamma = model.kkt_fn(q1, v1, tn, p)
-        K = ca.blockcat([[ca.diag(ca.DM(model.mass)), Phi_k.T],
-                         [Phi_k, ca.diag(model.free_fn(p))]])
-        sol = ca.solve(K, ca.vertcat(Qf, gamma), "qr")
-        c1, cd1 = model.cvel_fn(q1, v1)
-        vals: list = [None] * len(triggers)
-        ev.event_values(hs, c1, cd1, sol[nq:nq + m], triggers, vals, where=ca.if_else)
-        self.fn = Buffered(ca.Function("step", [q, v, a, t, tn, p], [
-            q1, v1, sol[:nq], r, ca.vertcat(0.0, *vals)]))
+            "abstol": 1e-13, "abstolStep": 0.0, "max_iter": 25, "error_on_fail": False,
+            "linear_solver": "lapacklu"})  # LU with partial pivoting, as numpy.linalg.solve
+        M = ca.MX.sym
+        q, v, a, t, tn, p = M("q", nq), M("v", nq), M("a", nq), M("t"), M("tn"), M("p", npar)
+        q0, targets, rates = pre(q, v, a, t, tn)
+        q1 = newton(q0, tn, p, targets)
+        r, J, rhs = vel(q1, tn, p, targets, rates)
+        v1 = ca.solve(J, rhs, "qr")
+        A, b = kkt(q1, v1, tn, p)
+        acc, values = fin(q1, v1, tn, p, ca.solve(A, b, "qr"))
+        self.fn = Buffered(ca.Function("step", [q, v, a, t, tn, p], [q1, v1, acc, r, values]))
 
     def __call__(self, q, v, a, t, tn, p):
         """(q, v, a) at ``tn``, the position residual and the event values."""
@@ -173,6 +193,7 @@ class IterativeIntegrator(Integrator):
         self.key: tuple | None = None
         self.st: _Stepper | None = None
         self._steps: dict[tuple, _CompiledStep] = {}
+        self.triggers: list[ev.Trigger] | None = None  # this configuration's (None: ask)
 
     def after_singular(self, t: float) -> None:
         # go on from the grid point before t: the next step ends on the grid again
@@ -216,7 +237,7 @@ class IterativeIntegrator(Integrator):
             self.stats.steps += 1
             if opts.progress is not None:
                 opts.progress.update(t)
-            crossed = ev.crossings(hs, q, v, t, values)
+            crossed = ev.crossings(hs, q, v, t, values, self.triggers)
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch
                 return SegmentEnd(t, q, v, tuple(crossed), "event")
@@ -231,7 +252,7 @@ class IterativeIntegrator(Integrator):
         model, hs = self.model, self.hs
         if model.callables:
             return None
-        triggers = ev.event_list(model, hs.locked)
+        triggers = self.triggers = ev.event_list(model, hs.locked)
         key = (tuple(self.coords), tuple(triggers), hs._mode(hs.locked, None, None))
         got = self._steps.get(key)
         if got is None:
