@@ -77,7 +77,7 @@ def bench_models(models: list[Path], *, t_end: float = 10.0, rtol: float = 1e-8,
 
 
 def chain_growth(sizes: tuple[int, ...] = (8, 16, 32), *, t_end: float = 1.0,
-                 rtol: float = 1e-8, repeat: int = 2) -> tuple[list[dict], float]:
+                 rtol: float = 1e-8, repeat: int = 3) -> tuple[list[dict], float]:
     """Wall time per simulated second of a swinging chain of n four-bar loops
     (:func:`cmm_dae.library.four_bar_chain`, one DOF, no singular position) for each n,
     default options, and the growth exponent from the first size to the last (the slope
