@@ -50,7 +50,8 @@ def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
     res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
-                   output_dt=args.output_dt, progress=args.progress, compiled=args.compiled)
+                   output_dt=args.output_dt, progress=args.progress, compiled=args.compiled,
+                   linsolver=args.linsolver)
     _summary(res)
     _save(res, args)
     return 0
@@ -240,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--save", help="save the Result to this .npz file")
     r.add_argument("--compiled", action="store_true",
                    help="run IDA's segments in C (needs a C compiler; built once, cached)")
+    r.add_argument("--linsolver", choices=("auto", "dense", "sparse"), default="auto",
+                   help="IDA's linear solver (auto: sparse from 300 unknowns)")
     r.set_defaults(func=_run)
 
     i = sub.add_parser("iterate", help="simulate a model with the paper's fixed-step algorithm")

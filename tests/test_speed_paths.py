@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae import ida, iterative, post, schur
+from cmm_dae import csegment, ida, iterative, post, schur
 from cmm_dae.errors import ModelError
 from cmm_dae.library import four_bar_chain
 
@@ -115,3 +115,22 @@ def test_bench_cli_reports_ratios(capsys):
     assert methods[0] == "IDA" and methods[-1] == "iterative"
     assert float(rows[0][6]) == 1.0  # IDA against itself
     assert main(["bench", "pendulum_stop", "--repeat", "0"]) == 2
+
+
+def test_run_cli_compiled_and_linsolver(capsys, tmp_path, monkeypatch):
+    """`cmm-dae run --compiled --linsolver sparse` runs (the saved Result says how), and a
+    linear solver that does not exist is refused by the parser."""
+    from cmm_dae.cli import main
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "r.npz"
+    assert main(["run", "pendulum_stop", "--t-end", "0.3", "--compiled", "--linsolver",
+                 "sparse", "--save", str(out)]) == 0
+    res = cd.load_result(out)
+    assert res.meta["linsolver"] == "sparse"
+    assert res.meta["compiled"] == (csegment.available() is None)  # C where it can be built
+    assert len(res.events) == 1
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "pendulum_stop", "--linsolver", "klu"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'klu'" in capsys.readouterr().err
