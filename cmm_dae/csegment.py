@@ -192,7 +192,7 @@ class CompiledModel:
         ncol = 2 * model.nq  # only q and v are recorded
         T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :ncol].copy()]
         info = np.zeros(ne, dtype=np.intc)
-        stats = np.zeros(4, dtype=np.int_)
+        stats = np.zeros(3, dtype=np.int_)
         n = ctypes.c_int(0)
         interrupted = False
         try:

@@ -102,6 +102,12 @@ class HybridState:
         return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
                 tuple(sorted(zones)), tuple(sorted(slip.items())))
 
+    def mode(self) -> tuple:
+        """The configuration in force as a hashable key: locked joints with their sides and
+        lock values, acting zoned loads, slip directions (what the event functions and a
+        configuration's equations depend on)."""
+        return self._mode(self.locked, None, None)
+
     def params_of(self, locked: Locked, zones: frozenset[str] | None = None,
                   slip: Mapping[str, int] | None = None) -> np.ndarray:
         """Parameter vector of any lock set (cached; a trial set is not registered), with

@@ -19,6 +19,7 @@ import warnings
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 import sksundae as sun
 
 from . import csegment
@@ -96,8 +97,6 @@ class IdaIntegrator(Integrator):
         self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
         self.ls_options: dict = {}
         if self.sparse:
-            import scipy.sparse as sp
-
             colind, row = model.jac_pattern.get_ccs()
             self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
                 (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
@@ -110,7 +109,6 @@ class IdaIntegrator(Integrator):
         self.relaxed = False  # multipliers still in the error test
         self.crossed_at = math.nan  # where the last singular-position crossing ended
         self._ev_cache: dict[tuple, Buffered] = {}
-        self.n_exact = 0  # event evaluations that needed a KKT solve
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
         # jump in the prescribed acceleration, so the run restarts there.
         self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
@@ -181,7 +179,7 @@ class IdaIntegrator(Integrator):
         microseconds instead of a dozen Python calls), with a second output below zero when
         a lock force is within the margin of its threshold. Cached per configuration."""
         hs, model = self.hs, self.model
-        key = (tuple(self.triggers), hs._mode(hs.locked, None, None))
+        key = self.ev_key = (tuple(self.triggers), hs.mode())
         fn = self._ev_cache.get(key)
         if fn is None:
             nq, m = model.nq, model.m
@@ -202,7 +200,6 @@ class IdaIntegrator(Integrator):
     def _exact_events(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """Event values with the lock forces of a KKT solve at (q, v, t)."""
         model = self.model
-        self.n_exact += 1
         p = model.fill(self.p, t, q, v)
         c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
         _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
@@ -303,7 +300,7 @@ class IdaIntegrator(Integrator):
             # ignored in favor of the user-defined jacfn": as intended
             warnings.simplefilter("ignore", UserWarning)
             solver = None if self.c is not None else sun.ida.IDA(
-            resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
+                resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
                 rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
                 first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)),
                 **self.ls_options)
@@ -384,8 +381,7 @@ class IdaIntegrator(Integrator):
                         first_step: float) -> csegment.SegmentRun:
         """The segment in C: the same IDA options, residual, Jacobian and event functions
         (compiled) as the Python path; the step budget and Ctrl-C act between chunks."""
-        key = (tuple(self.triggers), self.hs._mode(self.hs.locked, None, None))
-        fns = self.c.event_functions(key, self.ev_fn.fn, self.hs, self.triggers,
+        fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
                                      self.has_push)
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.opts.rtol, first_step,
                        self.opts.max_steps, self.step_budget, self.relaxed,

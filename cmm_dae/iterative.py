@@ -253,7 +253,7 @@ class IterativeIntegrator(Integrator):
         if model.callables:
             return None
         triggers = self.triggers = ev.event_list(model, hs.locked)
-        key = (tuple(self.coords), tuple(triggers), hs._mode(hs.locked, None, None))
+        key = (tuple(self.coords), tuple(triggers), hs.mode())
         got = self._steps.get(key)
         if got is None:
             got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)

@@ -97,7 +97,6 @@ typedef struct {
     const int *colptr, *rowind; /* the nonzeros are scattered into a dense matrix */
     double *jbuf;
     double tbuf, cjbuf, near;
-    long n_exact;
     /* IDA */
     SUNContext ctx;
     void *mem;
@@ -186,7 +185,6 @@ static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *
         s->evx.arg[1] = N_VGetArrayPointer(y);
         s->evx.arg[2] = s->p;
         s->evx.res[0] = g;
-        s->n_exact++;
         if (s->evx.f(s->evx.arg, s->evx.res, s->evx.iw, s->evx.w, 0)) return -1;
     }
     return 0;
@@ -297,7 +295,7 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
  * Returns SEG_MORE when the buffer filled first, SEG_STALLED past the step budget, else
  * the final IDA flag (0 at the end, IDA_TSTOP_RETURN, IDA_ROOT_RETURN with the root
  * information in info[ne], or a negative failure flag, the last sample being where IDA
- * stopped). stats: steps, residual and Jacobian evaluations, exact event evaluations. */
+ * stopped). stats: steps, residual and Jacobian evaluations. */
 int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *stats) {
     int flag = 0, k = 0, stop = 0;
     double tt = 0.0;
@@ -328,7 +326,6 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
     IDAGetNumSteps(s->mem, &stats[0]);
     IDAGetNumResEvals(s->mem, &stats[1]);
     IDAGetNumJacEvals(s->mem, &stats[2]);
-    stats[3] = s->n_exact;
     *n = k;
     if (stop) {
         s->done = 1;
