@@ -30,6 +30,8 @@ from sksundae._cy_ida import IDAMESSAGES
 
 from . import events as ev
 from .buffers import build_library, c_compiler, function_key
+from .equations import Model
+from .progress import Bar
 
 __all__ = ["CHUNK", "CompiledModel", "SegmentRun", "available", "c_compiler", "driver",
            "for_model"]
@@ -122,7 +124,7 @@ class SegmentRun:
 class CompiledModel:
     """A model's compiled residual and Jacobian and its configurations' event functions."""
 
-    def __init__(self, model, sparse: bool = False):
+    def __init__(self, model: Model, sparse: bool = False):
         self.model = model
         self.lib = driver()
         self.sparse = sparse
@@ -138,7 +140,8 @@ class CompiledModel:
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
-                        triggers: list[ev.Trigger], exact: bool):
+                        triggers: list[ev.Trigger], exact: bool
+                        ) -> tuple[ctypes.CDLL, tuple[int, int], tuple[int | None, int | None]]:
         """The compiled event functions of one configuration: the lean one of y (IDA's
         multipliers; ``lean`` as the Python path uses it) and, when lock forces are
         watched, the exact one of (t, y, p) with the multipliers of a KKT solve."""
@@ -169,17 +172,18 @@ class CompiledModel:
 
     def run(self, p: np.ndarray, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             atol: np.ndarray, rtol: float, first_step: float, max_steps: int, budget: int,
-            relaxed: bool, events, progress=None) -> SegmentRun:
+            relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None
+            ) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
-        else the samples at ``tspan[1:]``; stops at the first root (all are terminal)."""
+        else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
+        ``events``: the configuration's :meth:`event_functions`."""
         model, lib = self.model, self.lib
-        N, ne = model.N, 1 + events[3]
+        N, ne = model.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
         D = ctypes.c_double
-        tout = np.ascontiguousarray(tspan[1:], dtype=float)
-        keep = (p, y0, yp0, atol, tout)  # alive while the C side points at them
-        arrs = [np.ascontiguousarray(a, dtype=float) for a in keep]
-        p_, y0_, yp0_, atol_, tout_ = arrs
+        # contiguous copies, locals of this call: alive while the C side points at them
+        p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float)
+                                       for a in (p, y0, yp0, atol, tspan[1:]))
         seg = lib.cmm_seg_new(
             N, ne, 2 * model.nq, self.res[0], self.res[1], self.jac[0], self.jac[1],
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
@@ -197,7 +201,7 @@ class CompiledModel:
         interrupted = False
         try:
             while True:
-                cap = CHUNK if tspan.size == 2 else min(CHUNK, tout.size)
+                cap = CHUNK if tspan.size == 2 else min(CHUNK, tout_.size)
                 T, Y = np.empty(cap), np.empty((cap, ncol))
                 try:
                     flag = lib.cmm_seg_run(seg, T.ctypes.data_as(_D), Y.ctypes.data_as(_D),
@@ -230,7 +234,7 @@ _models: weakref.WeakKeyDictionary | None = None
 _warned = False
 
 
-def for_model(model, sparse: bool = False) -> CompiledModel | None:
+def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
     """The compiled segment of ``model`` (built on first use, kept with the model), or None
     with a warning (once per process) when it cannot be used: no working C compiler, no
     SUNDIALS libraries from scikit-sundae, or load laws given as Python callables."""

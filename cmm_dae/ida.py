@@ -385,7 +385,7 @@ class IdaIntegrator(Integrator):
                                      self.has_push)
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.opts.rtol, first_step,
                        self.opts.max_steps, self.step_budget, self.relaxed,
-                       (fns[0], fns[1], fns[2], len(self.triggers)), self.opts.progress)
+                       fns, len(self.triggers), self.opts.progress)
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted
         return r
