@@ -92,6 +92,12 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
             np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
 
 
+def _rows_of(model: Model, kind: str, name: str) -> list[int]:
+    """Indices in ``model.all_rows`` (the dropped redundant rows included: the
+    post-processed multipliers cover them) of one joint's, driver's or lock's rows."""
+    return [i for i, r in enumerate(model.all_rows) if r.kind == kind and r.name == name]
+
+
 #: most samples post-processed at a time (bounds the memory of the per-sample matrices)
 CHUNK = 2048
 #: bytes of Phi_q per chunk for a large model (its chunks are shorter)
@@ -122,18 +128,14 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
 
     if model.dropped:  # redundant rows: the reactions shared out at minimum norm
         lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
-    rows_all = model.all_rows
     mech = model.mech
-
-    def rows_of(kind: str, name: str) -> list[int]:
-        return [i for i, r in enumerate(rows_all) if r.kind == kind and r.name == name]
 
     nj = len(model.joint_names)
     pts = pts.reshape(2, n, nj).transpose(1, 2, 0)
     jforce = np.zeros((n, nj, 2))
     jtorque = np.zeros((n, nj))
     for k, (name, j) in enumerate(mech.joints.items()):
-        rows = rows_of("joint", name) + rows_of("lock", name)
+        rows = _rows_of(model, "joint", name) + _rows_of(model, "lock", name)
         G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
         ref = pts[:, k, :]
         if j.second_body != GROUND:
@@ -201,10 +203,6 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                **{k: np.zeros((0, ne)) for k in ("elem_len", "elem_rate", "elem_tension")},
                **{k: np.zeros((0, nld)) for k in ("load_value", "load_power")}}
     lam = ser["lam"]
-
-    def rows_of(kind: str, name: str) -> list[int]:
-        return [i for i, r in enumerate(model.all_rows) if r.kind == kind and r.name == name]
-
     nj = len(model.joint_names)
     # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
     # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
@@ -223,7 +221,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
     effort = np.zeros((n, len(model.driver_names)))
     for k, name in enumerate(model.driver_names):
-        effort[:, k] = -lam[:, rows_of("driver", name)[0]]
+        effort[:, k] = -lam[:, _rows_of(model, "driver", name)[0]]
 
     data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
             "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],
