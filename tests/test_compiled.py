@@ -9,11 +9,6 @@ series' units) are the issue's acceptance figures; measured differences are far 
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import textwrap
-
 import numpy as np
 import pytest
 
@@ -91,28 +86,3 @@ def test_step_budget_keeps_partial_result():
     assert err.value.status is Status.STALLED
     part = err.value.result
     assert part is not None and 0.5 < part.t[-1] < 10.0
-
-
-def test_clean_fallback_without_compiler(tmp_path):
-    """No working compiler: one warning, then the Python path with the same numbers."""
-    code = textwrap.dedent("""
-        import warnings
-        import cmm_dae as cd
-        mech = cd.load(cd.example("pendulum_stop"))
-        with warnings.catch_warnings(record=True) as w:
-            warnings.simplefilter("always")
-            a = cd.run_dae(mech, 1.0, compiled=True)
-            b = cd.run_dae(mech, 1.0, compiled=True)
-        print(len(w), str(w[0].message))
-        print(a.meta["compiled"], b.meta["compiled"])
-        print(a.events[0].t == cd.run_dae(mech, 1.0).events[0].t, b.events[0].t == a.events[0].t)
-    """)
-    env = dict(os.environ, CC=str(tmp_path / "no-such-compiler"),
-               CMM_DAE_CACHE=str(tmp_path / "cache"))
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                         text=True, timeout=300, check=True).stdout.splitlines()
-    out = [line for line in out if line and not line.startswith("[IDA")]
-    assert out[0].startswith("1 compiled segment not used")
-    assert "no-such-compiler" in out[0] or "compiler" in out[0]
-    assert out[1] == "False False"  # the Python path ran
-    assert out[2] == "True True"

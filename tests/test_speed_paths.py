@@ -11,6 +11,11 @@ Tolerances are stated at each assertion.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 
@@ -134,3 +139,29 @@ def test_run_cli_compiled_and_linsolver(capsys, tmp_path, monkeypatch):
         main(["run", "pendulum_stop", "--linsolver", "klu"])
     assert exc.value.code == 2
     assert "invalid choice: 'klu'" in capsys.readouterr().err
+
+
+def test_clean_fallback_without_compiler(tmp_path):
+    """compiled=True without a working compiler (here or on any machine): one warning,
+    then the Python path with the same numbers."""
+    code = textwrap.dedent("""
+        import warnings
+        import cmm_dae as cd
+        mech = cd.load(cd.example("pendulum_stop"))
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            a = cd.run_dae(mech, 1.0, compiled=True)
+            b = cd.run_dae(mech, 1.0, compiled=True)
+        print(len(w), str(w[0].message))
+        print(a.meta["compiled"], b.meta["compiled"])
+        print(a.events[0].t == cd.run_dae(mech, 1.0).events[0].t, b.events[0].t == a.events[0].t)
+    """)
+    env = dict(os.environ, CC=str(tmp_path / "no-such-compiler"),
+               CMM_DAE_CACHE=str(tmp_path / "cache"))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=300, check=True).stdout.splitlines()
+    out = [line for line in out if line and not line.startswith("[IDA")]
+    assert out[0].startswith("1 compiled segment not used")
+    assert "no-such-compiler" in out[0] or "compiler" in out[0]
+    assert out[1] == "False False"  # the Python path ran
+    assert out[2] == "True True"
