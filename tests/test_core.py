@@ -247,7 +247,8 @@ def test_energy_balance_and_drift(fixture, request):
 
 @pytest.mark.parametrize("name", ["slider_crank", "four_bar", "crank_pendulum"])
 def test_drift_at_default_tolerance(name):
-    """At the documented default rtol 1e-8 the drift bounds of DESIGN.md hold too."""
+    """At the documented default rtol 1e-8 the constraint drift stays within the bounds
+    asserted below."""
     res = cd.run_dae(cd.load(MODELS / f"{name}.toml"), 3.0, rtol=1e-8)
     pos, vel = res.drift
     assert pos <= 1e-9 and vel <= 1e-7

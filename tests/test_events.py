@@ -103,7 +103,7 @@ def test_restitution_series_and_zeno_lock(tmp_path):
 
 def test_bounce_at_tight_tolerance_is_not_redetected(tmp_path):
     """At rtol 1e-12 IDA's first step after a bounce can read the gap below zero from
-    round-off; no impact may be found while the joint moves away (SOLVER_NOTES)."""
+    round-off; no impact may be found while the joint moves away."""
     res = cd.run_dae(bouncing_model(tmp_path, 0.5), 0.7, rtol=1e-12, atol=1e-14,
                      output_dt=0.01)
     bounces = [ev for ev in res.events if ev.kind == "bounce"]
