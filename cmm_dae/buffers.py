@@ -103,10 +103,9 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
     return lib
 
 
-def function_key(funcs: list[ca.Function], extra: bytes = b"") -> str:
+def function_key(funcs: list[ca.Function]) -> str:
     """A short hash naming the library of ``funcs``."""
-    return hashlib.sha256(extra + b"".join(f.serialize().encode() for f in funcs)
-                          ).hexdigest()[:20]
+    return hashlib.sha256(b"".join(f.serialize().encode() for f in funcs)).hexdigest()[:20]
 
 
 def compile_functions(funcs: list[ca.Function]) -> list[ca.Function] | None:

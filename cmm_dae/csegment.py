@@ -129,13 +129,13 @@ class CompiledModel:
         self.lib = driver()
         self.sparse = sparse
         # the Jacobian's nonzeros in CSC order, on CasADi's own pattern, whichever solver
-        res, jac = model.c_residual, model.jac_sparse_fn
+        res, jac = model.res_sx, model.jac_sparse_fn
         colind, row = model.jac_pattern.get_ccs()
         self.colptr = np.asarray(colind, dtype=np.intc)
         self.rowind = np.asarray(row, dtype=np.intc)
         funcs = [res, jac]
         self.fns = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs)))
-        self.res = _pointers(self.fns, "cmm_res")
+        self.res = _pointers(self.fns, res.name())
         self.jac = _pointers(self.fns, jac.name())
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
 
@@ -161,10 +161,7 @@ class CompiledModel:
         nq, m = model.nq, model.m
         t, y, p = ca.MX.sym("t"), ca.MX.sym("y", model.N), ca.MX.sym("p", model.n_params)
         q, v = y[:nq], y[nq:2 * nq]
-        Phi_q, Qf, gamma = model.kkt_fn(q, v, t, p)
-        K = ca.blockcat([[ca.diag(ca.DM(model.mass)), Phi_q.T],
-                         [Phi_q, ca.diag(model.free_fn(p))]])
-        lam = ca.solve(K, ca.vertcat(Qf, gamma), "qr")[nq:nq + m]
+        lam = ca.solve(*model.kkt_system(q, v, t, p), "qr")[nq:nq + m]
         c, cd = model.cvel_fn(q, v)
         vals: list = [None] * len(triggers)
         ev.event_values(hs, c, cd, lam, triggers, vals, where=ca.if_else)

@@ -326,8 +326,9 @@ class Model:
         self.jac_pattern = J.sparsity()
         #: the structural pattern of Phi_q (m, nq)
         self.phi_q_pattern = Phi_q.sparsity()
-        #: the residual for C (:mod:`cmm_dae.csegment`, with ``jac_sparse_fn``)
-        self.c_residual = ca.Function("cmm_res", [t, y, yp, p], [F])
+        #: the symbolic residual (``res_fn`` may be replaced by a compiled one below), which
+        #: :mod:`cmm_dae.csegment` generates C from with ``jac_sparse_fn``
+        self.res_sx = self.res_fn
         self.compiled = False
         if compiled:
             funcs = compile_functions([self.res_fn, self.jac_fn])
@@ -470,6 +471,13 @@ class Model:
             raise np.linalg.LinAlgError("singular KKT matrix (a dead point or redundant "
                                         "constraints)")
         return sol[:self.nq], sol[self.nq:], Phi_q
+
+    def kkt_system(self, q, v, t, p) -> tuple[ca.MX | ca.SX, ca.MX | ca.SX]:
+        """The KKT matrix and right-hand side of :meth:`kkt` for CasADi symbols (for the
+        compiled event functions and iterative step)."""
+        Phi_q, Qf, gamma = self.kkt_fn(q, v, t, p)
+        return (ca.blockcat([[ca.diag(ca.DM(self.mass)), Phi_q.T],
+                             [Phi_q, ca.diag(self.free_fn(p))]]), ca.vertcat(Qf, gamma))
 
     def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:
         nq, m = self.nq, self.m

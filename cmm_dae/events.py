@@ -30,7 +30,7 @@ from .hybrid import (
 )
 from .kinematics import dependent_rows, impact_map, project_positions, project_velocities
 from .result import Event
-from .zones import _zone_margin, initial_zones, zone_switch
+from .zones import _zone_margin, initial_zones, pick, zone_switch
 
 # The names callers reach as ``events.X`` (the policy's vocabulary), whichever module holds
 # them.
@@ -63,13 +63,8 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
     return out
 
 
-def _pick(cond, a, b):
-    """``a if cond else b`` for numbers (:func:`event_values`' default ``where``)."""
-    return a if cond else b
-
-
 def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
-                 where=_pick) -> None:
+                 where=pick) -> None:
     """Values of the event functions of ``triggers`` (see :func:`event_list`) into ``out``.
 
     A gap is armed only while its joint approaches the stop (+1 while it moves away): just

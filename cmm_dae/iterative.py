@@ -138,9 +138,7 @@ class _CompiledStep:
             kkt = ca.Function("kkt", [q, v, tn, p], [
                 PM @ Phi_k.T - ca.diag(model.free_fn(p)), PM @ Qf - gamma])
         else:  # point masses: the whole KKT matrix
-            kkt = ca.Function("kkt", [q, v, tn, p], [
-                ca.blockcat([[ca.diag(ca.DM(model.mass)), Phi_k.T],
-                             [Phi_k, ca.diag(model.free_fn(p))]]), ca.vertcat(Qf, gamma)])
+            kkt = ca.Function("kkt", [q, v, tn, p], [*model.kkt_system(q, v, tn, p)])
         sol = S("sol", m if schur else nq + m)
         lam = sol if schur else sol[nq:nq + m]
         acc = (Qf - Phi_k.T @ sol) / ca.DM(model.mass) if schur else sol[:nq]

@@ -40,25 +40,10 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
         # (Phi_q M^-1 Phi_q^T - D) lam = Phi_q M^-1 Q - gamma, m x m instead of (nq + m)^2
         # (about 3x faster on the double-folded mechanism); an inactive lock row (zero in
         # Phi_q) reads -lam = 0. Point masses (zero inertia) need the whole KKT matrix.
-        st = schur.for_model(model)
-        if st is not None:  # large: a banded Schur complement sample by sample
-            try:
-                lam = schur.solve(st, Phi_q, model.mass, Qf, gamma, free)
-                a = (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass
-                return a, lam, Phi_q
-            except np.linalg.LinAlgError:
-                pass  # a singular sample: the whole matrix, sample by sample, below
-        PM = Phi_q / model.mass
-        S = PM @ Phi_q.transpose(0, 2, 1)
-        d = np.arange(m)
-        S[:, d, d] -= free
-        rhs = np.einsum("nrk,nk->nr", PM, Qf) - gamma
-        try:
-            lam = np.linalg.solve(S, rhs[..., None])[..., 0]
-            a = (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass
-            return a, lam, Phi_q
-        except np.linalg.LinAlgError:
-            pass  # a singular sample: the whole matrix, sample by sample, below
+        lam = _schur_multipliers(model, Phi_q, Qf, gamma, free)
+        if lam is not None:
+            return (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass, lam, Phi_q
+        # a singular sample: the whole matrix, sample by sample, below
     A = np.zeros((n, nq + m, nq + m))
     d = np.arange(nq + m)
     A[:, d[:nq], d[:nq]] = model.mass
@@ -72,6 +57,27 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
         sol = np.array([np.linalg.lstsq(Ai, bi, rcond=None)[0]  # rest still count
                         for Ai, bi in zip(A, rhs, strict=True)])
     return sol[:, :nq], sol[:, nq:], Phi_q
+
+
+def _schur_multipliers(model: Model, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray,
+                       free: np.ndarray) -> np.ndarray | None:
+    """Multipliers (n, m) from the Schur complement: banded sample by sample for a large
+    mechanism, else dense and batched; None when a sample's complement is singular."""
+    st = schur.for_model(model)
+    if st is not None:
+        try:
+            return schur.solve(st, Phi_q, model.mass, Qf, gamma, free)
+        except np.linalg.LinAlgError:
+            pass  # the dense one, then the whole matrix
+    PM = Phi_q / model.mass
+    S = PM @ Phi_q.transpose(0, 2, 1)
+    d = np.arange(model.m)
+    S[:, d, d] -= free
+    rhs = np.einsum("nrk,nk->nr", PM, Qf) - gamma
+    try:
+        return np.linalg.solve(S, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return None
 
 
 def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,

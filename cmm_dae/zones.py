@@ -10,16 +10,19 @@ from .hybrid import HybridState, Transition
 from .result import Event
 
 
-def _zone_margin(hs: HybridState, load: str, c, cdot, where=None):
+def pick(cond, a, b):
+    """``a if cond else b`` for numbers: the numeric ``where`` of the event functions
+    (:func:`cmm_dae.events.event_values`; ``casadi.if_else`` builds them symbolically)."""
+    return a if cond else b
+
+
+def _zone_margin(hs: HybridState, load: str, c, cdot, where=pick):
     """Distance of a zone's joint coordinate to the edge it moves toward, positive while
     the load's acting state matches where the coordinate is (acting inside, idle
     outside). As with the stops, an edge is armed only while the coordinate approaches
     it (+1 otherwise): a coordinate at rest on an edge (a jaw closed on its stop at the
     end of a cut) must not read as a root at every restart. ``where`` as in
-    :func:`cmm_dae.events.event_values` (numbers when None)."""
-    if where is None:
-        def where(cond, a, b):
-            return a if cond else b
+    :func:`cmm_dae.events.event_values`."""
     k, lo, up = hs.model.zone_info[load]
     x, xd = c[k], cdot[k]
     tol = _edge_tol(x)  # on an edge to round-off counts as on it (see zone_switch)
