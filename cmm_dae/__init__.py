@@ -40,6 +40,7 @@ from .params import with_params
 from .report import Comparison, compare
 from .result import Configuration, Event, Result, Stats
 from .runner import METHODS, run_dae, run_iterative, simulate
+from .sensitivity import Sensitivities, sensitivities
 from .storage import load_result
 from .structure import Group, Structure, labeller, structure
 from .studies import Convergence, WorkPrecision, convergence, work_precision
@@ -52,7 +53,8 @@ __all__ = [
     "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",
     "Load",
     "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",
-    "run_iterative", "simulate", "SolverError", "Spring", "Stats", "Status", "Structure",
+    "run_iterative", "Sensitivities", "sensitivities", "simulate", "SolverError", "Spring",
+    "Stats", "Status", "Structure",
     "structure", "sweep", "SweepTable", "with_params", "work_precision", "WorkPrecision",
     "Zone",
 ]

@@ -152,27 +152,35 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     return v
 
 
-def start_state(model: Model, hs: HybridState, t0: float = 0.0
-                ) -> tuple[np.ndarray, np.ndarray, list[Event]]:
-    """Consistent positions and velocities at t0, with joints that start pressed on a stop
-    locked (a ``lock`` event each)."""
-    mech = model.mech
+def start_spec(mech) -> tuple[dict[str, float], dict[str, float]]:
+    """The joint coordinates (rad, m) and rates the start is assembled from: the
+    non-driven ``[initial] joints`` with their rates (0 unless given), or the rates of
+    ``[initial] velocities`` alone when they name as many other joints."""
     ini = mech.initial
-    # A joint given exactly on one of its limits is a candidate for a start on the stop.
-    on_stop = {}
-    for name in mech.limited_joints:
-        if name in ini.joints:
-            lim = mech.joints[name].limits
-            val = ini.joints[name]
-            for side, L in (("lower", lim.lower), ("upper", lim.upper)):
-                if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
-                    on_stop[name] = side
     known = {k: v for k, v in ini.joints.items() if k not in mech.drivers}
     rates = {k: 0.0 for k in known}
     rates.update({k: v for k, v in ini.velocities.items() if k not in mech.drivers})
     if len(ini.velocities) and set(ini.velocities) != set(known) and \
             len(ini.velocities) == len(known):
         rates = dict(ini.velocities)
+    return known, rates
+
+
+def start_state(model: Model, hs: HybridState, t0: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+    """Consistent positions and velocities at t0, with joints that start pressed on a stop
+    locked (a ``lock`` event each)."""
+    mech = model.mech
+    known, rates = start_spec(mech)
+    # A joint given exactly on one of its limits is a candidate for a start on the stop.
+    on_stop = {}
+    for name in mech.limited_joints:
+        if name in mech.initial.joints:
+            lim = mech.joints[name].limits
+            val = mech.initial.joints[name]
+            for side, L in (("lower", lim.lower), ("upper", lim.upper)):
+                if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
+                    on_stop[name] = side
     q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
     v = assemble_velocities(model, q, t0, hs.p, rates)
     hs.zones = initial_zones(model, q)

@@ -21,6 +21,7 @@ This is the only module besides ``dae`` that imports CasADi.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -30,6 +31,7 @@ from scipy.linalg.lapack import dgesv
 from .buffers import Buffered, compile_functions
 from .laws import driver_expr, law_expr
 from .mechanism import GROUND, Mechanism
+from .params import param_value, symbolic
 
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
 
@@ -81,8 +83,19 @@ class Model:
         Limited joints, in the order of their lock rows and of ``p``.
     """
 
-    def __init__(self, mech: Mechanism, *, compiled: bool = False, drop: tuple[int, ...] = ()):
+    def __init__(self, mech: Mechanism, *, compiled: bool = False, drop: tuple[int, ...] = (),
+                 theta: Sequence[str] = ()):
         self.mech = mech
+        #: model parameters (dotted paths, checked by the caller) kept as the symbols
+        #: ``theta`` in :attr:`sym` (the equations for sensitivities); the compiled
+        #: functions hold their values ``theta0``
+        self.theta_paths = tuple(theta)
+        self.theta = ca.SX.sym("theta", len(self.theta_paths))
+        self.theta0 = np.array([param_value(mech, x) for x in self.theta_paths])
+        smech = symbolic(mech, {x: self.theta[i] for i, x in enumerate(self.theta_paths)}) \
+            if self.theta_paths else mech
+        #: the mechanism with the parameters theta as symbols
+        self.smech = smech
         self.body_names = list(mech.bodies)
         self.joint_names = list(mech.joints)
         self.driver_names = list(mech.drivers)
@@ -146,12 +159,12 @@ class Model:
                 ua = _rot(angle(j.first_body)) @ ca.DM(u)
                 na = ca.vertcat(-ua[1], ua[0])
                 coords.append(ca.dot(ua, d))
-                rows += [dth - j.angle, ca.dot(na, d)]
+                rows += [dth - smech.joints[name].angle, ca.dot(na, d)]
             self.rows += [Row("joint", name), Row("joint", name)]
         c = ca.vertcat(*coords)
         jidx = {n: i for i, n in enumerate(self.joint_names)}
         self.jidx = jidx
-        for name, d in mech.drivers.items():
+        for name, d in smech.drivers.items():
             rows.append(c[jidx[name]] - driver_expr(d, t))
             self.rows.append(Row("driver", name))
         n_base = len(rows)
@@ -184,13 +197,13 @@ class Model:
 
         # Generalized applied forces: gravity, then springs and dampers on joint coordinates.
         Qf = ca.SX.zeros(nq)
-        g = mech.gravity
-        for i, b in enumerate(mech.bodies.values()):
+        g = smech.gravity
+        for i, b in enumerate(smech.bodies.values()):
             Qf[3 * i] += b.mass * g[0]
             Qf[3 * i + 1] += b.mass * g[1]
         c_q = ca.jacobian(c, q)
         cdot = c_q @ v
-        for name, j in mech.joints.items():
+        for name, j in smech.joints.items():
             k = jidx[name]
             gen = 0.0
             if j.spring is not None:
@@ -205,7 +218,7 @@ class Model:
         # smooth within a configuration and its switches are events.
         for f, name in enumerate(self.frictional):
             k = jidx[name]
-            Qf -= c_q[k, :].T * (mech.joints[name].friction.kinetic * p[2 * nl + nz + f])
+            Qf -= c_q[k, :].T * (smech.joints[name].friction.kinetic * p[2 * nl + nz + f])
 
         # Applied loads: a law times a joint direction, a point force or a body moment.
         self.load_names = list(mech.loads)
@@ -249,7 +262,7 @@ class Model:
         # Force elements between two points: tension pulls the points together.
         self.element_names = list(mech.elements)
         el_len, el_rate, el_ten = [], [], []
-        for el in mech.elements.values():
+        for el in smech.elements.values():
             dvec = point(el.second) - point(el.first)
             L = ca.sqrt(ca.dot(dvec, dvec))
             L_q = ca.jacobian(L, q)
@@ -266,7 +279,34 @@ class Model:
             ref_pts.append(point(j.second))
         P = ca.horzcat(*ref_pts) if ref_pts else ca.SX(2, 0)
 
-        Mdiag = ca.DM(self.mass)
+        mass_sx = []
+        for b in smech.bodies.values():
+            mass_sx += [b.mass, b.mass, b.inertia]
+        Mdiag = ca.vertcat(*mass_sx)
+        # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
+        lam = ca.SX.sym("lam", m)
+        mu = ca.SX.sym("mu", m)
+        y = ca.vertcat(q, v, lam, mu)
+        yp = ca.SX.sym("yp", y.numel())
+
+        def ggl(Phi_q, Qf, phi, h, Mdiag):
+            qp, vp = yp[:nq], yp[nq:2 * nq]
+            return ca.vertcat(qp - v + Phi_q.T @ mu, Mdiag * vp + Phi_q.T @ lam - Qf,
+                              phi + free * mu, h + free * lam)
+
+        #: the symbolic equations with the parameters theta free (sensitivities)
+        self.sym = {"q": q, "v": v, "a": a, "t": t, "p": p, "theta": self.theta,
+                    "phi": phi, "Phi_q": Phi_q, "Phi_t": Phi_t, "h": h, "gamma": gamma,
+                    "Qf": Qf, "c": c, "cdot": cdot, "c_q": c_q, "free": free, "mass": Mdiag,
+                    "P": P, "y": y, "yp": yp, "lam": lam,
+                    "F": ggl(Phi_q, Qf, phi, h, Mdiag)}
+        if self.theta_paths:  # the numeric functions below hold the parameters' values
+            (phi, Phi_q, Phi_t, h, gamma, Qf, cddot, Mdiag, *ex) = ca.substitute(
+                [phi, Phi_q, Phi_t, h, gamma, Qf, cddot, Mdiag, *el_len, *el_rate, *el_ten,
+                 *load_val, *load_pow], [self.theta], [ca.DM(self.theta0)])
+            ne, nld = len(el_len), len(load_val)
+            el_len, el_rate, el_ten = ex[:ne], ex[ne:2 * ne], ex[2 * ne:3 * ne]
+            load_val, load_pow = ex[3 * ne:3 * ne + nld], ex[3 * ne + nld:]
         dn = ca.densify
         self.phi_fn = ca.Function("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)])
         self.coord_fn = ca.Function("coord", [q, v], [dn(c), dn(cdot), dn(c_q)])
@@ -304,17 +344,8 @@ class Model:
         self._active: dict[bytes, np.ndarray] = {}
         self._maps: dict[tuple[str, int], Buffered] = {}
 
-        # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
-        lam = ca.SX.sym("lam", m)
-        mu = ca.SX.sym("mu", m)
-        y = ca.vertcat(q, v, lam, mu)
-        yp = ca.SX.sym("yp", y.numel())
         cj = ca.SX.sym("cj")
-        qp, vp = yp[:nq], yp[nq:2 * nq]
-        F = ca.vertcat(qp - v + Phi_q.T @ mu,
-                       Mdiag * vp + Phi_q.T @ lam - Qf,
-                       phi + free * mu,
-                       h + free * lam)
+        F = ggl(Phi_q, Qf, phi, h, Mdiag)
         J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
         self.N = int(y.numel())
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])

@@ -25,6 +25,7 @@ from .hybrid import (
     Locked,
     LockUpError,
     Policy,
+    SegmentTrace,
     Transition,
     Trigger,
 )
@@ -35,7 +36,8 @@ from .zones import _zone_margin, initial_zones, pick, zone_switch
 # The names callers reach as ``events.X`` (the policy's vocabulary), whichever module holds
 # them.
 __all__ = [
-    "ZENO_DT", "HybridState", "LockUpError", "Policy", "Transition", "Trigger", "at_limit",
+    "ZENO_DT", "HybridState", "LockUpError", "Policy", "SegmentTrace", "Transition",
+    "Trigger", "at_limit",
     "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
     "impact_map", "initial_zones", "over_constrained", "project_positions",
     "project_velocities", "release", "stick_or_slip", "would_reenter", "zeno", "zone_switch",

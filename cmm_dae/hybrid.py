@@ -8,6 +8,7 @@ of the shared state undone afterwards.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -65,6 +66,31 @@ class Transition:
     event: Event
     q: np.ndarray
     v: np.ndarray
+
+
+@dataclass
+class SegmentTrace:
+    """What a run did in one configuration segment, for a second pass over the same
+    sequence (the sensitivities): the state handed to the integrator at ``t0``, the
+    configuration (``p``, and the policy's state ``locked``, ``zones``, ``slip``,
+    ``stick_at``), the samples it recorded (indices ``n0`` to ``n1``), how it ended and,
+    per trigger handled there, the transitions it caused."""
+
+    t0: float
+    q: np.ndarray
+    v: np.ndarray
+    p: np.ndarray
+    locked: dict[str, str]
+    zones: frozenset[str]
+    slip: dict[str, int]
+    stick_at: dict[str, float]
+    n0: int
+    n1: int = 0
+    t1: float = math.nan
+    reason: str = ""
+    #: per trigger: the trigger, its transitions, the parameter vector after each
+    groups: list[tuple[Trigger, list[Transition], list[np.ndarray]]] = field(
+        default_factory=list)
 
 
 def _key(locked: Locked) -> tuple:

@@ -14,14 +14,17 @@ from .errors import ModelError, Problem
 from .mechanism import Damper, Initial, Limits, Mechanism, Spring
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
+#: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
+_TABLES = ("bodies", "joints", "drivers", "elements")
 
 
 #: Scalar numeric fields a dotted path may set, per table (sub-tables as "spring.rest").
 _FIELDS = {
     "bodies": ("mass", "inertia"),
     "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
-               "limits.lower", "limits.upper"),
+               "limits.lower", "limits.upper", "friction.static", "friction.kinetic"),
     "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
+    "elements": ("stiffness", "rest", "damping", "preload"),
 }
 
 
@@ -42,6 +45,10 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
         if fld == "spring.rest" and j.spring is None:
             return (f"joint '{name}' has no spring: set joints.{name}.spring.stiffness to "
                     "give it one")
+        if fld.startswith("limits.") and getattr(j.limits, fld[7:], None) is None:
+            return f"joint '{name}' has no {fld[7:]} limit"
+        if fld.startswith("friction.") and j.friction is None:
+            return f"joint '{name}' has no friction"
     if table == "drivers":
         d = mech.drivers[name]
         if fld not in _DRIVER_USES[d.motion]:
@@ -53,7 +60,7 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
 def path_problem(mech: Mechanism, path: str) -> Problem | None:
     """Why a dotted path is not a parameter that can be set (None when it is)."""
     parts = path.split(".")
-    tables = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}
+    tables = {k: getattr(mech, k) for k in _TABLES}
     if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
             and ".".join(parts[2:]) in _FIELDS[parts[0]]:
         why = _no_effect(mech, parts)
@@ -79,8 +86,7 @@ def param_value(mech: Mechanism, path: str) -> float:
     if parts[0] == "initial":
         table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
         return float(table.get(parts[2], math.nan))
-    obj = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers}[parts[0]]
-    obj = obj[parts[1]]
+    obj = getattr(mech, parts[0])[parts[1]]
     for name in parts[2:]:
         obj = getattr(obj, name) if obj is not None else None
     return float(obj) if obj is not None else (0.0 if parts[-1] in ("stiffness", "damping")
@@ -92,8 +98,10 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
 
     Paths: ``bodies.NAME.mass|inertia``, ``joints.NAME.restitution|angle``,
     ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
-    ``joints.NAME.limits.lower|upper``, ``drivers.JOINT.speed|initial|amplitude|...``,
-    ``initial.joints.NAME``, ``initial.velocities.NAME``, ``gravity.x|y``.
+    ``joints.NAME.limits.lower|upper``, ``joints.NAME.friction.static|kinetic``,
+    ``drivers.JOINT.speed|initial|amplitude|...``,
+    ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
+    ``initial.velocities.NAME``, ``gravity.x|y``.
 
     Raises
     ------
@@ -102,22 +110,33 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
         number, or a path whose value the mechanism never reads (e.g. the amplitude of a
         constant-speed driver), each named.
     """
-    bodies, joints = dict(mech.bodies), dict(mech.joints)
-    drivers = dict(mech.drivers)
-    ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
-    gravity = list(mech.gravity)
     problems = []
     for path, value in values.items():
-        parts = str(path).split(".")
         if isinstance(value, bool) or not isinstance(value, int | float | np.number):
             problems.append(Problem("sweep", path, f"expected a number, got {value!r}"))
             continue
-        value = float(value)
-        tables = {"bodies": bodies, "joints": joints, "drivers": drivers}
         bad = path_problem(mech, str(path))
         if bad is not None:
             problems.append(bad)
-        elif parts[0] in tables:
+    if problems:
+        raise ModelError(problems, mech.source)
+    return _replaced(mech, {str(k): float(v) for k, v in values.items()}, check=True)
+
+
+def symbolic(mech: Mechanism, values: Mapping[str, object]) -> Mechanism:
+    """A copy of ``mech`` (not validated) whose fields at the given (checked) dotted
+    paths hold other objects: CasADi symbols, from which the model's equations are built
+    as functions of those parameters (sensitivities)."""
+    return _replaced(mech, values, check=False)
+
+
+def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mechanism:
+    tables = {k: dict(getattr(mech, k)) for k in _TABLES}
+    ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
+    gravity = list(mech.gravity)
+    for path, value in values.items():
+        parts = path.split(".")
+        if parts[0] in tables:
             table = tables[parts[0]]
             obj = table[parts[1]]
             if len(parts) == 3:
@@ -133,9 +152,8 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
             (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
         else:
             gravity["xy".index(parts[1])] = value
-    if problems:
-        raise ModelError(problems, mech.source)
-    return mech.replace(bodies=bodies, joints=joints, drivers=drivers,
-                        initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
-                        gravity=tuple(gravity))
-
+    out = mech.replace(**tables, initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
+                       gravity=tuple(gravity), check=check)
+    if not check:  # the constructor makes the gravity floats
+        object.__setattr__(out, "gravity", tuple(gravity))
+    return out

@@ -125,7 +125,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
              v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
              model: Model | None = None, progress: bool = False,
              branch: str | tuple[str, int] = "continue", compiled: bool = False,
-             linsolver: str = "auto") -> Result:
+             linsolver: str = "auto", _trace: list | None = None) -> Result:
     """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
 
     Parameters
@@ -199,7 +199,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
                                linsolver=linsolver)
     try:
         with _one_blas_thread():
-            res = _run(mech, opts, METHODS[method], throw, model)
+            res = _run(mech, opts, METHODS[method], throw, model, _trace)
         bar.update(float(res.t[-1]))
         return res
     finally:
@@ -207,7 +207,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
 
 
 def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
-         model: Model | None) -> Result:
+         model: Model | None, trace: list | None = None) -> Result:
+    """The run; ``trace`` (a list) receives the start state and one
+    :class:`~cmm_dae.hybrid.SegmentTrace` per segment (for :mod:`cmm_dae.sensitivity`)."""
     wall0 = time.perf_counter()
     mech, eq_values = solve_equilibrium(mech)
     if any(not p.startswith("initial.") for p in eq_values):
@@ -242,13 +244,23 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     integ = cls(model, hs, opts, stats)
     status, message, err = Status.SUCCESS, "success", None
     t = 0.0
+    if trace is not None:
+        trace.append((q.copy(), v.copy(), list(events)))
     try:
         while True:
+            seg = None if trace is None else ev.SegmentTrace(
+                t, q.copy(), v.copy(), hs.p.copy(), dict(hs.locked), hs.zones, dict(hs.slip),
+                dict(hs.stick_at), len(rec))
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
             t, q, v = end.t, end.q, end.v
+            if seg is not None:
+                seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
+                trace.append(seg)
             for trig in end.triggers:
                 done = ev.handle(hs, trig, q, v, t, integ.policy)
+                if seg is not None:
+                    seg.groups.append((trig, done, [hs.params[x.event.after] for x in done]))
                 for tr in done:
                     events.append(tr.event)
                     q, v = tr.q, tr.v

@@ -1,0 +1,143 @@
+"""Forward sensitivities through events against closed forms and against central finite
+differences of tight runs (rtol 1e-12), Richardson-extrapolated so that the difference
+quotient's own truncation error (O(h^2)) is removed: the reference is independent of the
+sensitivity equations."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+from cmm_dae.errors import CmmError, ModelError
+from cmm_dae.params import param_value, with_params
+
+MODELS = Path(__file__).resolve().parents[1] / "models"
+TIGHT = {"rtol": 1e-12, "atol": 1e-14}
+
+
+def _fd(mech, path, t_end, rel_h, fn):
+    """Richardson-extrapolated central difference of fn(Result) in parameter ``path``;
+    fails loudly if the event sequence changes within the window."""
+    x = param_value(mech, path)
+    h = rel_h * max(abs(x), 1e-2)
+
+    def central(hh):
+        rp = cd.run_dae(with_params(mech, {path: x + hh}), t_end, **TIGHT)
+        rm = cd.run_dae(with_params(mech, {path: x - hh}), t_end, **TIGHT)
+        assert [(e.kind, e.joint) for e in rp.events] == [(e.kind, e.joint) for e in rm.events]
+        return (fn(rp) - fn(rm)) / (2 * hh)
+
+    return (4 * central(h / 2) - central(h)) / 3
+
+
+def _event_times(res):
+    return np.array([e.t for e in res.events])
+
+
+def test_rod_onto_stop_closed_form():
+    """d t_impact / d stop angle = -1 / |angular rate at impact| (the rod arrives falling:
+    a higher stop is met earlier)."""
+    mech = cd.load(MODELS / "pendulum_stop.toml")
+    s = cd.sensitivities(mech, ["joints.O.limits.lower"], 1.0, rtol=1e-10, atol=1e-12)
+    e = s.result.events[0]
+    assert e.kind == "limit" and e.joint == "O"
+    expected = -1.0 / abs(e.velocity_before)
+    assert s.event_times[0, 0] == pytest.approx(expected, rel=1e-8)
+
+
+def test_impact_time_independent_of_mass_when_inertia_scales():
+    """Scaling mass and inertia together changes nothing of a pendulum's motion: the
+    directional derivative m dt/dm + J dt/dJ vanishes, while each part does not."""
+    mech = cd.load(MODELS / "pendulum_stop.toml")
+    s = cd.sensitivities(mech, ["bodies.rod.mass", "bodies.rod.inertia"], 1.0,
+                         rtol=1e-10, atol=1e-12)
+    m, J = s.values
+    d = s.event_times[0]
+    assert abs(d[0]) > 1e-3  # each alone moves the impact
+    assert abs(m * d[0] + J * d[1]) < 1e-9 * abs(m * d[0])
+    # the positions too, at every sample
+    pos = s.joint("O").position
+    assert np.max(np.abs(m * pos[:, 0] + J * pos[:, 1])) < 1e-8 * np.max(np.abs(m * pos[:, 0]))
+
+
+def test_double_folded_against_finite_differences():
+    """Lock and release times, joint positions and the driving torque of the paper's
+    mechanism, through the lock (plastic impact on E's stop) and the release."""
+    mech = cd.load(MODELS / "double_folded.toml")
+    params = ["joints.D.spring.stiffness", "joints.E.limits.upper", "drivers.A.speed"]
+    s = cd.sensitivities(mech, params, 10.0, rtol=1e-11, atol=1e-13)
+    res = s.result
+    assert [e.kind for e in res.events] == ["limit", "release"]
+    grid = np.unique(res.t[res.away_from_events(res.t, 0.05)])
+    for i, path in enumerate(params):
+        fd = _fd(mech, path, 10.0, 1e-3, _event_times)
+        np.testing.assert_allclose(s.event_times[:, i], fd, rtol=1e-6)
+
+        def series(r):
+            return np.concatenate([r.resample(grid, r.joint("E").position),
+                                   r.resample(grid, r.joint("D").position),
+                                   r.resample(grid, r.driver("A").effort)])
+
+        fd = _fd(mech, path, 10.0, 1e-3, series)
+        ours = np.concatenate([res.resample(grid, s.joint("E").position[:, i]),
+                               res.resample(grid, s.joint("D").position[:, i]),
+                               res.resample(grid, s.driver("A").effort[:, i])])
+        assert np.max(np.abs(ours - fd)) < 1e-6 * np.max(np.abs(fd)), path
+
+
+def test_bounces_and_restitution():
+    """A rod bouncing on its stop (e = 0.5): every bounce time's derivative with respect
+    to the restitution, the stop and the start angle."""
+    mech = cd.load(MODELS / "pendulum_stop.toml")
+    mech = with_params(mech, {"joints.O.restitution": 0.5})
+    params = ["joints.O.restitution", "joints.O.limits.lower", "initial.joints.O"]
+    s = cd.sensitivities(mech, params, 1.2, rtol=1e-11, atol=1e-13)
+    kinds = [e.kind for e in s.result.events]
+    assert kinds[:10] == ["bounce"] * 10
+    # the first ten bounces (flights of 0.21 s down to 0.9 ms); the later ones accumulate
+    # (Zeno) toward a rest time that the difference quotients no longer resolve
+    for i, path in enumerate(params):
+        fd = _fd(mech, path, 1.2, 1e-4, _event_times)
+        np.testing.assert_allclose(s.event_times[:10, i], fd[:10], rtol=1e-6, atol=1e-9)
+
+
+def test_stick_slip_friction_levels():
+    """Stick and slip of a block under a harmonic push: event times against the friction
+    levels and the block's mass."""
+    mech = cd.load(MODELS / "stick_slip_block.toml")
+    names = [n for n, j in mech.joints.items() if j.friction is not None]
+    params = [f"joints.{names[0]}.friction.static", f"joints.{names[0]}.friction.kinetic",
+              f"bodies.{next(iter(mech.bodies))}.mass"]
+    s = cd.sensitivities(mech, params, 3.0, rtol=1e-11, atol=1e-13)
+    assert {e.kind for e in s.result.events} >= {"slip", "stick"}
+    for i, path in enumerate(params):
+        fd = _fd(mech, path, 3.0, 1e-4, _event_times)
+        movable = np.array([e.t > 0 for e in s.result.events])
+        np.testing.assert_allclose(s.event_times[movable, i], fd[movable], rtol=1e-6,
+                                   atol=1e-9)
+
+
+def test_bad_parameters_are_named():
+    mech = cd.load(MODELS / "double_folded.toml")
+    with pytest.raises(ModelError, match="joints.Q.spring.stiffness"):
+        cd.sensitivities(mech, ["joints.Q.spring.stiffness"], 1.0)
+    with pytest.raises(ModelError, match="joints.A.restitution.*no limits"):
+        cd.sensitivities(mech, ["joints.A.restitution"], 1.0)
+    with pytest.raises(ModelError, match="named twice"):
+        cd.sensitivities(mech, ["drivers.A.speed", "drivers.A.speed"], 1.0)
+    with pytest.raises(ModelError, match="expected a dotted model path"):
+        cd.sensitivities(mech, [3], 1.0)
+    with pytest.raises(ModelError, match="non-empty list"):
+        cd.sensitivities(mech, "drivers.A.speed", 1.0)
+    with pytest.raises(ModelError, match="name"):
+        cd.sensitivities(mech, ["mechanism.name"], 1.0)
+    pre = cd.load(MODELS / "double_folded_preloaded.toml")
+    with pytest.raises(ModelError, match="equilibrium"):
+        cd.sensitivities(pre, ["drivers.A.speed"], 1.0)
+
+
+def test_singular_crossing_is_refused():
+    mech = cd.load(MODELS / "iftomm_a02_four_bar_N1.toml")
+    with pytest.raises((CmmError, ModelError), match="singular|redundant"):
+        cd.sensitivities(mech, ["gravity.y"], 1.0)
