@@ -9,6 +9,7 @@ Public API::
     res.driver("A").effort, res.joint("B").force, res.events, res.stats, res.status
 """
 
+from .design import Design, DesignError, Target, design
 from .equations import Model
 from .errors import (
     STATUS_MESSAGES,
@@ -48,14 +49,15 @@ from .sweep import SweepTable, sweep
 
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
-    "Configuration", "Convergence", "convergence", "Damper", "Driver", "Element", "Event",
+    "Configuration", "Convergence", "convergence", "Damper", "Design", "DesignError", "design",
+    "Driver", "Element", "Event",
     "example", "examples",
     "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",
     "Load",
     "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",
     "run_iterative", "Sensitivities", "sensitivities", "simulate", "SolverError", "Spring",
     "Stats", "Status", "Structure",
-    "structure", "sweep", "SweepTable", "with_params", "work_precision", "WorkPrecision",
+    "structure", "sweep", "Target", "SweepTable", "with_params", "work_precision", "WorkPrecision",
     "Zone",
 ]
 __version__ = "0.2.0"

@@ -1,8 +1,8 @@
 """Command line interface ``cmm-dae``.
 
 Commands: ``run``, ``iterate``, ``compare``, ``events``, ``structure``, ``animate``, ``plot``,
-``sweep``, ``bench``, ``examples``, ``schema``. A model is a TOML file or the name of a
-shipped example (``cmm-dae compare double_folded --out out``).
+``sweep``, ``sensitivities``, ``design``, ``bench``, ``examples``, ``schema``. A model is a
+TOML file or the name of a shipped example (``cmm-dae compare double_folded --out out``).
 Bad input gives a clear message on stderr and a non-zero exit code (2: bad input, 3: the
 run failed part-way), never a traceback.
 """
@@ -219,6 +219,40 @@ def _schema(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sensitivities(args: argparse.Namespace) -> int:
+    from . import sensitivities
+
+    if not args.param:
+        raise CmmError("give at least one --param PATH (e.g. --param "
+                       "joints.D.spring.stiffness)")
+    s = sensitivities(_load(args.model), args.param, args.t_end, rtol=args.rtol,
+                      atol=args.rtol * 1e-2, error_control=not args.no_error_control,
+                      progress=args.progress)
+    _summary(s.result)
+    print()
+    print("d t_event / d parameter (s per unit of the parameter):")
+    print(s.event_table())
+    for note in s.notes:
+        print(f"note: {note}")
+    print(f"sensitivities of {len(s.params)} parameter(s) in {s.wall_time:.2f} s")
+    return 0
+
+
+def _design(args: argparse.Namespace) -> int:
+    from .design import DesignError, design_spec
+
+    spec = design_spec(args.spec)
+    out = Path(args.out) if args.out else spec.pop("out")
+    try:
+        d = spec.pop("run_design")()
+    except DesignError as e:
+        print(f"cmm-dae: {e}", file=sys.stderr)
+        return 3
+    print(d.summary())
+    print(f"wrote {d.report(out, overwrite=args.force)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
                                  "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
@@ -295,6 +329,23 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--compiled", action="store_true",
                     help="run IDA's segments in C (needs a C compiler; built once, cached)")
     sw.set_defaults(func=_sweep)
+
+    se = sub.add_parser("sensitivities", help="d(event times)/d(parameters), exact through "
+                        "every event")
+    common(se)
+    se.add_argument("--param", action="append", default=[], metavar="PATH",
+                    help="a dotted model path, e.g. joints.E.limits.upper (repeat)")
+    se.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
+    se.add_argument("--no-error-control", action="store_true",
+                    help="leave the sensitivities out of IDA's error test (faster)")
+    se.set_defaults(func=_sensitivities)
+
+    de = sub.add_parser("design", help="optimise parameters on exact gradients (a TOML "
+                        "study file: model, params with bounds, objective, targets)")
+    de.add_argument("spec", help="the design study file (TOML)")
+    de.add_argument("--out", help="report directory (default: the file's 'out')")
+    de.add_argument("--force", action="store_true", help="overwrite an existing report")
+    de.set_defaults(func=_design)
 
     ex = sub.add_parser("examples", help="list the shipped example models")
     ex.set_defaults(func=_examples)
