@@ -490,7 +490,19 @@ class _Pass:
         # in it, IDA failed to converge at rtol 1e-12 on the double-folded mechanism)
         off = np.concatenate([np.zeros(2 * nq), np.full(2 * m, ATOL_OFF)])
         alg = [k for i in range(P + 1) for k in range(i * N + 2 * nq, (i + 1) * N)]
-        tspan = np.concatenate([[t0], times])
+        # the output times, each a clear step after the one before (a sample a hair after
+        # another, next to an event, is read from its neighbour below)
+        want: list[float] = []
+        for x in times:
+            near = ev.ZENO_DT * max(1.0, abs(x))
+            if want and x - want[-1] <= near:
+                want[-1] = x  # the later one: the segment's end stays an output
+            elif want or x - t0 > near:
+                want.append(x)
+        if not want:  # a segment of no length: the state and sensitivities as they start
+            self.sq[seg.n0:seg.n1], self.sv[seg.n0:seg.n1] = sq, sv
+            return q, v, sq, sv
+        tspan = np.concatenate([[t0], want])
         extra = None
         if tspan.size == 2:  # scikit-sundae returns its own steps for two points
             extra = 0.5 * (tspan[0] + tspan[1])
@@ -512,12 +524,21 @@ class _Pass:
             raise SolverError(f"the sensitivity integration failed at t = {r.t[-1]:.9g} s: "
                               f"IDA: {r.message}", status=Status.INTEGRATOR)
         Y = np.asarray(r.y)
+        T = np.asarray(r.t)
         if extra is not None:
-            Y = Y[[0, 2]]
-        Y = Y[1:]
+            Y, T = Y[[0, 2]], T[[0, 2]]
+        Y, T = Y[1:], T[1:]
+        if T.size != len(want):
+            raise SolverError(f"the sensitivity integration returned {T.size} of "
+                              f"{len(want)} output times in the segment from t = {t0:.9g} s",
+                              status=Status.INTEGRATOR)
         S = Y[:, N:].reshape(-1, P, N).transpose(0, 2, 1)  # (n, N, P)
-        self.sq[seg.n0:seg.n1] = S[:, :nq]
-        self.sv[seg.n0:seg.n1] = S[:, nq:2 * nq]
+        # each sample from the nearest output (the same time but for merged neighbours)
+        hi = np.clip(np.searchsorted(T, times), 0, T.size - 1)
+        lo = np.clip(hi - 1, 0, T.size - 1)
+        idx = np.where(np.abs(T[lo] - times) < np.abs(T[hi] - times), lo, hi)
+        self.sq[seg.n0:seg.n1] = S[idx, :nq]
+        self.sv[seg.n0:seg.n1] = S[idx, nq:2 * nq]
         return (Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), S[-1, :nq].copy(),
                 S[-1, nq:2 * nq].copy())
 
