@@ -226,7 +226,7 @@ def _sensitivities(args: argparse.Namespace) -> int:
         raise CmmError("give at least one --param PATH (e.g. --param "
                        "joints.D.spring.stiffness)")
     s = sensitivities(_load(args.model), args.param, args.t_end, rtol=args.rtol,
-                      atol=args.rtol * 1e-2, error_control=not args.no_error_control,
+                      atol=args.rtol * 1e-2, error_control=args.error_control,
                       progress=args.progress)
     _summary(s.result)
     print()
@@ -336,8 +336,8 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument("--param", action="append", default=[], metavar="PATH",
                     help="a dotted model path, e.g. joints.E.limits.upper (repeat)")
     se.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
-    se.add_argument("--no-error-control", action="store_true",
-                    help="leave the sensitivities out of IDA's error test (faster)")
+    se.add_argument("--error-control", action="store_true",
+                    help="keep the sensitivities in IDA's error test (slower)")
     se.set_defaults(func=_sensitivities)
 
     de = sub.add_parser("design", help="optimise parameters on exact gradients (a TOML "

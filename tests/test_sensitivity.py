@@ -86,6 +86,17 @@ def test_double_folded_against_finite_differences():
         assert np.max(np.abs(ours - fd)) < 1e-6 * np.max(np.abs(fd)), path
 
 
+def test_error_control_option_agrees():
+    """With the sensitivities in IDA's error test the same derivatives come out."""
+    mech = cd.load(MODELS / "double_folded.toml")
+    params = ["joints.D.spring.rest", "joints.E.limits.upper"]
+    a = cd.sensitivities(mech, params, 8.0, rtol=1e-10, atol=1e-12)
+    b = cd.sensitivities(mech, params, 8.0, rtol=1e-10, atol=1e-12, error_control=True)
+    np.testing.assert_allclose(a.event_times, b.event_times, rtol=1e-7)
+    np.testing.assert_allclose(a.driver("A").effort, b.driver("A").effort, rtol=0,
+                               atol=1e-7 * np.max(np.abs(b.driver("A").effort)))
+
+
 def test_bounces_and_restitution():
     """A rod bouncing on its stop (e = 0.5): every bounce time's derivative with respect
     to the restitution, the stop and the start angle."""
