@@ -38,6 +38,7 @@ import sksundae as sun
 from . import events as ev
 from .assembly import redundant_base_rows, start_spec
 from .equations import Buffered, Model
+from .equilibrium import solve_equilibrium
 from .errors import CmmError, ModelError, Problem, SolverError, Status
 from .hybrid import HybridState, SegmentTrace
 from .ida import ATOL_LAMBDA, ATOL_MU
@@ -178,9 +179,6 @@ def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
 
 
 def _unsupported(mech: Mechanism, model: Model) -> str | None:
-    if mech.initial.equilibrium:
-        return ("an [initial] equilibrium start (its solved values would depend on the "
-                "parameters)")
     if model.callables:
         return "load laws given as Python callables (CasADi cannot differentiate them)"
     if model.m and redundant_base_rows(model):
@@ -700,13 +698,22 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
 
     wall0 = time.perf_counter()
     paths = check_params(mech, params)
-    model = Model(mech, theta=paths)
+    solved: tuple[str, ...] = ()
+    if mech.initial.equilibrium:  # the solved values move with the parameters: carried
+        mech, eq_values = solve_equilibrium(mech)  # as parameters, eliminated at the end
+        solved = tuple(eq_values)
+        clash = [x for x in paths if x in solved]
+        if clash:
+            raise ModelError([Problem("sensitivities", x, "is solved by the [initial] "
+                                      "equilibrium, not a free parameter") for x in clash],
+                             mech.source)
+    model = Model(mech, theta=paths + solved)
     why = _unsupported(mech, model)
     if why is not None:
         raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),
                          mech.source)
     eq = _Equations(model)
-    unused = [x for i, x in enumerate(paths) if not x.startswith(("initial.", "joints."))
+    unused = [x for i, x in enumerate(paths + solved) if not x.startswith(("initial.", "joints."))
               and not ca.depends_on(model.sym["F"], model.theta[i])]
     if unused:
         raise ModelError([Problem("sensitivities", x, "has no effect on this mechanism's "
@@ -732,6 +739,29 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     if sp.tau:
         ev_t[len(start_events):len(start_events) + len(sp.tau)] = sp.tau
     data = sp.outputs()
-    return Sensitivities(res, paths, model.theta0.copy(), ev_t, data,
+    if solved:
+        ev_t, data = _through_equilibrium(model, ev_t, data, len(paths))
+    return Sensitivities(res, paths, model.theta0[:len(paths)].copy(), ev_t, data,
                          time.perf_counter() - wall0, sp.notes)
+
+
+def _through_equilibrium(model: Model, ev_t: np.ndarray, data: dict[str, np.ndarray],
+                         n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Total derivatives with respect to the first ``n`` parameters when the others were
+    solved by the equilibrium start: those make the named joints' accelerations at t = 0
+    vanish, so (implicit function theorem) d solved / d p = -(d acc / d solved)^-1
+    (d acc / d p), both read from the start sample's own sensitivities."""
+    mech = model.mech
+    known = [model.jidx[k] for k in mech.initial.joints if k not in mech.drivers]
+    J = data["cdd"][0][known]  # (coordinates, all parameters)
+    try:
+        d_solved = -np.linalg.solve(J[:, n:], J[:, :n])
+    except np.linalg.LinAlgError:
+        raise CmmError("the equilibrium start is singular in its solved parameters: its "
+                       "sensitivities are not defined") from None
+
+    def total(x: np.ndarray) -> np.ndarray:
+        return x[..., :n] + x[..., n:] @ d_solved
+
+    return total(ev_t), {k: total(v) for k, v in data.items()}
 

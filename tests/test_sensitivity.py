@@ -144,8 +144,33 @@ def test_bad_parameters_are_named():
     with pytest.raises(ModelError, match="name"):
         cd.sensitivities(mech, ["mechanism.name"], 1.0)
     pre = cd.load(MODELS / "double_folded_preloaded.toml")
-    with pytest.raises(ModelError, match="equilibrium"):
-        cd.sensitivities(pre, ["drivers.A.speed"], 1.0)
+    with pytest.raises(ModelError, match="solved by the \\[initial\\] equilibrium"):
+        cd.sensitivities(pre, ["joints.D.spring.rest"], 1.0)
+
+
+def test_through_the_equilibrium_start():
+    """The preloaded mechanism solves D's spring rest for a static start: the derivatives
+    include how that rest moves with the parameters (each difference run solves it
+    again). Compared on the series over the first 0.5 s, before any event."""
+    mech = cd.load(MODELS / "double_folded_preloaded.toml")
+    # both move the solved rest (link 3's weight loads D's spring)
+    params = ["joints.D.spring.stiffness", "bodies.link3.mass"]
+    s = cd.sensitivities(mech, params, 0.5, rtol=1e-11, atol=1e-13)
+    res = s.result
+    grid = res.t[res.t > 0.05]
+
+    def series(r):
+        return np.concatenate([r.resample(grid, r.joint(j).position) for j in ("D", "E")]
+                              + [r.resample(grid, r.driver("A").effort)])
+
+    for i, path in enumerate(params):
+        # relative steps of 1e-2: each difference run solves the rest again, to about
+        # 1e-12 rad, which smaller steps turn into noise of the order of the tolerance
+        fd = _fd(mech, path, 0.5, 1e-2, series)
+        ours = np.concatenate([res.resample(grid, s.joint(j).position[:, i])
+                               for j in ("D", "E")]
+                              + [res.resample(grid, s.driver("A").effort[:, i])])
+        assert np.max(np.abs(ours - fd)) < 1e-6 * np.max(np.abs(fd)), path
 
 
 def test_singular_crossing_is_refused():
