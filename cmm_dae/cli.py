@@ -239,7 +239,8 @@ def _sensitivities(args: argparse.Namespace) -> int:
 
 
 def _design(args: argparse.Namespace) -> int:
-    from .design import DesignError, design_spec
+    from .design import DesignError
+    from .studyfile import design_spec
 
     spec = design_spec(args.spec)
     out = Path(args.out) if args.out else spec.pop("out")

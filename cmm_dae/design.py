@@ -14,7 +14,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
@@ -24,8 +23,9 @@ from .mechanism import Mechanism
 from .params import param_value, with_params
 from .result import Result
 from .sensitivity import Sensitivities, check_params, sensitivities
+from .targets import Target, parse_target
 
-__all__ = ["Design", "DesignError", "Target", "design", "design_spec", "peak_effort"]
+__all__ = ["Design", "DesignError", "Target", "design", "peak_effort"]
 
 
 class DesignError(CmmError):
@@ -33,113 +33,6 @@ class DesignError(CmmError):
     sequence); ``history`` holds the designs evaluated before it."""
 
     history: list[dict]
-
-#: The series a target may name: (table, series) -> accessor names.
-_SERIES = {("joint", "position"), ("joint", "velocity"), ("joint", "acceleration"),
-           ("joint", "torque"), ("driver", "effort")}
-
-
-@dataclass(frozen=True)
-class Target:
-    """A constraint of a design study.
-
-    An event target names an event by ``event`` ("KIND JOINT", e.g. ``"limit E"`` or
-    ``"release E"``) and its ``occurrence`` (1 = the first such event); a series target
-    names ``series`` ("joint E position", "driver A effort") at time ``t`` (s). Either
-    asks for ``value`` (equality) or bounds it by ``min`` and/or ``max`` (s for an event,
-    the series' unit otherwise).
-    """
-
-    event: str | None = None
-    occurrence: int = 1
-    series: str | None = None
-    t: float | None = None
-    value: float | None = None
-    min: float | None = None
-    max: float | None = None
-
-    @property
-    def label(self) -> str:
-        what = (f"{self.event} #{self.occurrence} time" if self.event is not None
-                else f"{self.series} at t = {self.t:g} s")
-        if self.value is not None:
-            return f"{what} = {self.value:g}"
-        parts = [f">= {self.min:g}" if self.min is not None else "",
-                 f"<= {self.max:g}" if self.max is not None else ""]
-        return f"{what} {' and '.join(p for p in parts if p)}"
-
-    def measure(self, s: Sensitivities) -> tuple[float, np.ndarray]:
-        """The targeted quantity and its gradient (P,) in one sensitivity run."""
-        res = s.result
-        if self.event is not None:
-            kind, joint = self.event.split(" ", 1)
-            hits = [i for i, e in enumerate(res.events) if e.kind == kind and e.joint == joint]
-            if len(hits) < self.occurrence:
-                seq = ", ".join(f"{e.kind} {e.joint} at {e.t:.4g} s" for e in res.events)
-                raise CmmError(f"target '{self.label}': the run has {len(hits)} '{kind} "
-                               f"{joint}' event(s) (events: {seq or 'none'}); the event "
-                               "sequence changed with the parameters")
-            i = hits[self.occurrence - 1]
-            return float(res.events[i].t), s.event_times[i].copy()
-        table, name, what = self.series.split(" ")
-        res_series = getattr(getattr(res, table)(name), what)
-        sens_series = getattr(getattr(s, table)(name), what)
-        val = float(res.resample(np.array([self.t]), res_series)[0])
-        grad = np.array([res.resample(np.array([self.t]), sens_series[:, k])[0]
-                         for k in range(sens_series.shape[1])])
-        return val, grad
-
-
-def _target(x: Any, i: int, mech: Mechanism) -> Target:
-    if isinstance(x, Target):
-        t = x
-    elif isinstance(x, Mapping):
-        allowed = {"event", "occurrence", "series", "t", "value", "min", "max"}
-        extra = set(x) - allowed
-        if extra:
-            raise ModelError(Problem("design", f"constraints[{i}]", "unknown key(s) "
-                                     f"{', '.join(sorted(extra))}; expected "
-                                     f"{', '.join(sorted(allowed))}"), mech.source)
-        t = Target(**x)
-    else:
-        raise ModelError(Problem("design", f"constraints[{i}]", f"expected a table (dict) "
-                                 f"or a Target, got {x!r}"), mech.source)
-    key = f"constraints[{i}]"
-    if (t.event is None) == (t.series is None):
-        raise ModelError(Problem("design", key, "expected exactly one of 'event' or "
-                                 "'series'"), mech.source)
-    if t.event is not None:
-        parts = str(t.event).split(" ")
-        if len(parts) != 2 or parts[1] not in mech.joints:
-            raise ModelError(Problem("design", key, f"'event' must be 'KIND JOINT' with a "
-                                     f"joint of the mechanism (e.g. 'limit E'), got "
-                                     f"{t.event!r}"), mech.source)
-        if not isinstance(t.occurrence, int) or t.occurrence < 1:
-            raise ModelError(Problem("design", key, "'occurrence' must be an integer >= 1"),
-                             mech.source)
-    else:
-        parts = str(t.series).split(" ")
-        table = {"joint": mech.joints, "driver": mech.drivers}
-        if len(parts) != 3 or (parts[0], parts[2]) not in _SERIES or \
-                parts[1] not in table.get(parts[0], {}):
-            raise ModelError(Problem("design", key, "'series' must be 'joint NAME "
-                                     "position|velocity|acceleration|torque' or 'driver "
-                                     f"NAME effort', got {t.series!r}"), mech.source)
-        if not isinstance(t.t, int | float) or isinstance(t.t, bool):
-            raise ModelError(Problem("design", key, "a series target needs a time 't' in s"),
-                             mech.source)
-    vals = [t.value, t.min, t.max]
-    if all(v is None for v in vals) or (t.value is not None and
-                                        (t.min is not None or t.max is not None)):
-        raise ModelError(Problem("design", key, "expected 'value', or 'min' and/or 'max'"),
-                         mech.source)
-    for v in vals:
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
-                              or not math.isfinite(v)):
-            raise ModelError(Problem("design", key, f"expected finite numbers, got {v!r}"),
-                             mech.source)
-    return t
-
 
 def peak_effort(driver: str | None = None) -> Callable[[Result, Sensitivities],
                                                        tuple[float, np.ndarray]]:
@@ -374,7 +267,7 @@ def design(mech: Mechanism, params: Sequence[str], bounds: Sequence[tuple[float,
                            f"got {objective!r}"))
     if bad:
         raise ModelError(bad, mech.source)
-    targets = [_target(c, i, mech) for i, c in enumerate(constraints)]
+    targets = [parse_target(c, i, mech) for i, c in enumerate(constraints)]
     fobj = peak_effort(driver or next(iter(mech.drivers))) if isinstance(objective, str) \
         else objective
     label = getattr(fobj, "label", getattr(fobj, "__name__", "objective"))
@@ -450,88 +343,3 @@ def design(mech: Mechanism, params: Sequence[str], bounds: Sequence[tuple[float,
                   first[0], best[0], targets, [v for v, _ in first[2]],
                   [v for v, _ in best[2]], history, first[3], best[3], success, message,
                   time.perf_counter() - wall0, nit)
-
-
-_SPEC_KEYS = {"model", "t_end", "objective", "driver", "method", "max_iter", "out", "run",
-              "params", "targets"}
-
-
-def design_spec(path: str | Path) -> dict[str, Any]:
-    """Read a design study file (TOML)::
-
-        model = "double_folded"          # a model file (relative to this file) or example
-        t_end = 10.0                     # s
-        objective = "peak_effort"        # the peak |effort| of `driver` (default: first)
-        method = "SLSQP"                 # or "trust-constr"
-        out = "design_report"            # report directory (relative to this file)
-        [run]                            # options of each run
-        rtol = 1e-10
-        [[params]]
-        path = "joints.D.spring.stiffness"
-        bounds = [0.5, 2.0]
-        [[targets]]
-        event = "limit E"
-        value = 2.5
-
-    Returns a dict with ``out`` (Path) and ``run_design`` (a callable running the study).
-
-    Raises
-    ------
-    ModelError
-        The file cannot be read, or a key is missing or wrong (file, table and key named).
-    """
-    import tomllib
-
-    from .library import model_path
-    from .loader import load
-
-    path = Path(path)
-    src = str(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ModelError(Problem("", "", f"cannot read the file: {e.strerror or e}"),
-                         src) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ModelError(Problem("", "", f"not a TOML file: {e}"), src) from None
-    bad = [Problem("", k, f"unknown key; expected {', '.join(sorted(_SPEC_KEYS))}")
-           for k in data if k not in _SPEC_KEYS]
-    for k in ("model", "params"):
-        if k not in data:
-            bad.append(Problem("", k, "missing"))
-    params = data.get("params", [])
-    if not isinstance(params, list) or not all(isinstance(p, dict) for p in params):
-        bad.append(Problem("params", "", "expected [[params]] tables with 'path' and "
-                           "'bounds'"))
-        params = []
-    for i, p in enumerate(params):
-        for k in ("path", "bounds"):
-            if k not in p:
-                bad.append(Problem(f"params[{i}]", k, "missing"))
-        extra = set(p) - {"path", "bounds"}
-        if extra:
-            bad.append(Problem(f"params[{i}]", ", ".join(sorted(extra)), "unknown key; "
-                               "expected path, bounds"))
-    run = data.get("run", {})
-    if not isinstance(run, dict):
-        bad.append(Problem("run", "", "expected a table of run options (rtol, atol, ...)"))
-    targets = data.get("targets", [])
-    if not isinstance(targets, list):
-        bad.append(Problem("targets", "", "expected [[targets]] tables"))
-    t_end = data.get("t_end", 10.0)
-    if isinstance(t_end, bool) or not isinstance(t_end, int | float) or t_end <= 0:
-        bad.append(Problem("", "t_end", f"expected a positive end time in s, got {t_end!r}"))
-    if bad:
-        raise ModelError(bad, src)
-    model = str(data["model"])
-    rel = path.parent / model
-    mech = load(rel if rel.suffix == ".toml" and rel.is_file() else model_path(model))
-    out = path.parent / str(data.get("out", "design_report"))
-
-    def run_design() -> Design:
-        return design(mech, [p["path"] for p in params], [tuple(p["bounds"]) for p in params],
-                      data.get("objective", "peak_effort"), targets, float(t_end),
-                      driver=data.get("driver"), method=data.get("method", "SLSQP"),
-                      max_iter=int(data.get("max_iter", 50)), **run)
-
-    return {"out": out, "run_design": run_design}

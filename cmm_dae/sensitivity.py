@@ -26,45 +26,24 @@ system itself).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-import sksundae as sun
 
-from . import events as ev
-from .assembly import redundant_base_rows, start_spec
-from .equations import Buffered, Model
+from .assembly import redundant_base_rows
+from .equations import Model
 from .equilibrium import solve_equilibrium
-from .errors import CmmError, ModelError, Problem, SolverError, Status
-from .hybrid import HybridState, SegmentTrace
-from .ida import ATOL_LAMBDA, ATOL_MU
-from .mechanism import GROUND, Mechanism
+from .errors import CmmError, ModelError, Problem
+from .mechanism import Mechanism
 from .params import path_problem
 from .result import Result
+from .sensitivity_model import Equations
+from .sensitivity_pass import SensitivityPass
 
 __all__ = ["Sensitivities", "sensitivities"]
-
-#: Absolute tolerance on the multipliers' sensitivities: out of IDA's error test.
-ATOL_OFF = 1e6
-#: Without ``error_control`` the position and velocity sensitivities are held to this many
-#: times the state's absolute tolerance (per unit of parameter): entirely out of the test,
-#: IDA took 107,163 residual evaluations instead of 1,123 on the slider-crank with a stop;
-#: entirely in it, 138,780 instead of 1,258 on a soft-spring double-folded design. 1e2 and
-#: 1e3 kept both near the plain cost, 1e4 did not.
-LOOSE = 1e3
-
-
-class _Mat(Buffered):
-    """A :class:`Buffered` function whose outputs are always 2-D, shaped as CasADi's
-    (a column stays a column, a row a row, whatever the number of parameters)."""
-
-    def __call__(self, *args) -> list[np.ndarray]:
-        return [np.reshape(o, s) for o, s in zip(super().__call__(*args), self.shapes,
-                                                  strict=True)]
 
 
 @dataclass(frozen=True)
@@ -161,6 +140,7 @@ class Sensitivities:
 
 
 # --------------------------------------------------------------------- checks
+
 def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
     """The parameter paths, checked: each a numeric parameter with an effect."""
     if isinstance(params, str) or not isinstance(params, Sequence) or not params:
@@ -191,476 +171,6 @@ def _unsupported(mech: Mechanism, model: Model) -> str | None:
     return None
 
 
-# --------------------------------------------------------------------- the equations
-class _Equations:
-    """The CasADi functions of the sensitivity pass, built once per model."""
-
-    def __init__(self, model: Model):
-        self.model = model
-        sy = model.sym
-        q, v, t, p, th = sy["q"], sy["v"], sy["t"], sy["p"], sy["theta"]
-        y, yp, F = sy["y"], sy["yp"], sy["F"]
-        nq, m, N, P = model.nq, model.m, model.N, model.theta.numel()
-        self.P = P
-        npar = model.n_params
-        # --- augmented residual: [F; F_y S + F_y' S' + F_p dP + F_theta]
-        S = ca.SX.sym("S", N, P)
-        Sp = ca.SX.sym("Sp", N, P)
-        dP = ca.SX.sym("dP", npar, P)
-        Fs = (ca.jacobian(F, y) @ S + ca.jacobian(F, yp) @ Sp + ca.jacobian(F, p) @ dP
-              + ca.jacobian(F, th))
-        Y = ca.vertcat(y, ca.vec(S))
-        Yp = ca.vertcat(yp, ca.vec(Sp))
-        Fa = ca.vertcat(F, ca.vec(Fs))
-        cj = ca.SX.sym("cj")
-        J = ca.jacobian(Fa, Y) + cj * ca.jacobian(Fa, Yp)
-        self.res = ca.Function("sres", [t, Y, Yp, p, ca.vec(dP), th], [Fa])
-        self.jac = ca.Function("sjac", [t, Y, Yp, cj, p, ca.vec(dP), th], [ca.densify(J.T)])
-        # --- KKT system K z = r, z = [a; lambda], and its derivatives
-        z = ca.SX.sym("z", nq + m)
-        K = ca.blockcat([[ca.diag(sy["mass"]), sy["Phi_q"].T], [sy["Phi_q"], ca.diag(sy["free"])]])
-        R = K @ z - ca.vertcat(sy["Qf"], sy["gamma"])
-        dn = ca.densify
-        self.kkt = _Mat(ca.Function("skkt", [q, v, t, p, th, z], [dn(K)] + [
-            dn(ca.jacobian(R, x)) for x in (q, v, t, p, th)]))
-        # --- impact map: K [v+; Lambda] = [M v-; b], b the velocity targets
-        vm = ca.SX.sym("vm", nq)
-        erow = ca.SX.sym("erow", m)
-        tgt = ca.SX.sym("tgt")
-        b = -sy["Phi_t"] * (1 - sy["free"]) * (1 - erow) + erow * tgt
-        Ri = K @ z - ca.vertcat(sy["mass"] * vm, b)
-        self.imp = _Mat(ca.Function("simp", [q, vm, t, p, th, erow, tgt, z], [dn(K)] + [
-            dn(ca.jacobian(Ri, x)) for x in (q, vm, t, p, th, tgt)]))
-        # the rebound target -e c'_k of a joint (onehot over joints)
-        onehot = ca.SX.sym("oh", len(model.joint_names))
-        e = ca.vertcat(*[j.restitution for j in model.smech.joints.values()])
-        target = -ca.dot(onehot, e) * ca.dot(onehot, sy["cdot"])
-        self.tgt = _Mat(ca.Function("stgt", [q, v, th, onehot], [target] + [
-            dn(ca.jacobian(target, x)) for x in (q, v, th)]))
-        # --- constraints (positions, velocities) and their derivatives
-        phi, h = sy["phi"], sy["h"]
-        self.pos = _Mat(ca.Function("spos", [q, t, p, th], [dn(x) for x in (
-            phi, sy["Phi_q"], sy["Phi_t"], ca.jacobian(phi, p), ca.jacobian(phi, th))]))
-        self.vel = _Mat(ca.Function("svel", [q, v, t, p, th], [dn(x) for x in (
-            h, ca.jacobian(h, q), sy["Phi_q"], ca.jacobian(h, p), ca.jacobian(h, th))]))
-        # --- joint coordinates and rates
-        c, cd = sy["c"], sy["cdot"]
-        self.coords = _Mat(ca.Function("scoord", [q, v], [dn(x) for x in (
-            c, cd, sy["c_q"], ca.jacobian(cd, q))]))
-        # --- outputs: c, c', c'', joint forces, torques, efforts
-        a = sy["a"]
-        lam = ca.SX.sym("lamo", m)
-        out = self._outputs(lam)
-        self.n_out = out.numel()
-        self.out = _Mat(ca.Function("sout", [q, v, a, p, th, lam], [dn(out)] + [
-            dn(ca.jacobian(out, x)) for x in (q, v, a, th, lam)]))
-        self._events: dict[tuple, Buffered] = {}
-
-    def _outputs(self, lam) -> ca.SX:
-        """The Result's joint and driver series as one vector (post-processing's
-        definitions: force of the first body on the second at the second's point)."""
-        model = self.model
-        sy = model.sym
-        q, v, a = sy["q"], sy["v"], sy["a"]
-        c_q, cd = sy["c_q"], sy["cdot"]
-        cdd = c_q @ a + ca.jacobian(cd, q) @ v
-        Phi_q = sy["Phi_q"]
-        G_all, fx, fy, tq = [], [], [], []
-        Pts = sy["P"]
-        for k, (name, j) in enumerate(model.mech.joints.items()):
-            rows = model.rows_of("joint", name) + model.rows_of("lock", name)
-            G = -(Phi_q[rows, :].T @ lam[rows]) if rows else ca.SX.zeros(model.nq)
-            ref = Pts[:, k]
-            second = j.second_body != GROUND
-            b = model.bidx[j.second_body if second else j.first_body]
-            F, Mc = G[3 * b:3 * b + 2], G[3 * b + 2]
-            rb = q[3 * b:3 * b + 2]
-            if second:
-                fx.append(F[0])
-                fy.append(F[1])
-                d = ref - rb
-                tq.append(Mc - (d[0] * F[1] - d[1] * F[0]))
-            else:
-                fx.append(-F[0])
-                fy.append(-F[1])
-                d = rb - ref
-                tq.append(-(Mc + (d[0] * F[1] - d[1] * F[0])))
-            G_all.append(G)
-        eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
-        force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
-        return ca.vertcat(sy["c"], cd, cdd, force, *tq, *eff)
-
-    def event_function(self, seg: SegmentTrace, trig: ev.Trigger) -> Buffered:
-        """The event function of ``trig`` in segment ``seg``'s configuration, as the
-        policy defines it, with the parameters symbolic: (g, g_q, g_v, g_theta, g_lam)."""
-        key = (trig, tuple(sorted(seg.locked.items())), seg.zones,
-               tuple(sorted(seg.slip.items())))
-        fn = self._events.get(key)
-        if fn is None:
-            model = self.model
-            sy = model.sym
-            lam = ca.SX.sym("lamg", model.m)
-            hs = _SymbolicState(model, locked=dict(seg.locked), zones=seg.zones,
-                                slip=dict(seg.slip), stick_at=dict(seg.stick_at))
-            out = [None]
-            ev.event_values(hs, sy["c"], sy["cdot"], lam, [trig], out, where=ca.if_else)
-            g = ca.SX(out[0])
-            fn = self._events[key] = _Mat(ca.Function(
-                "sev", [sy["q"], sy["v"], sy["theta"], lam],
-                [g] + [ca.densify(ca.jacobian(g, x)) for x in (sy["q"], sy["v"], sy["theta"],
-                                                              lam)]))
-        return fn
-
-
-@dataclass
-class _SymbolicState(HybridState):
-    """The policy's state with the mechanism's thresholds (stop positions, static
-    friction) read from the model's symbolic parameters: the event functions of
-    :func:`~cmm_dae.events.event_values` as functions of them."""
-
-    def limit_value(self, joint: str, side: str):
-        if side == "stick":
-            return self.stick_at[joint]
-        lim = self.model.smech.joints[joint].limits
-        return lim.lower if side == "lower" else lim.upper
-
-    def static(self, joint: str):
-        f = self.model.smech.joints[joint].friction
-        return f.static if f is not None else 0.0
-
-
-# --------------------------------------------------------------------- the pass
-class _Pass:
-    """The sensitivity pass over a traced run."""
-
-    def __init__(self, model: Model, eq: _Equations, res: Result, opts: dict,
-                 error_control: bool):
-        self.model, self.eq, self.res = model, eq, res
-        self.P = eq.P
-        self.th = model.theta0
-        self.rtol, self.atol = opts["rtol"], opts["atol"]
-        self.error_control = error_control
-        n = res.t.size
-        nq = model.nq
-        self.sq = np.full((n, nq, self.P), np.nan)
-        self.sv = np.full((n, nq, self.P), np.nan)
-        self.dP: list[np.ndarray | None] = [None] * n
-        self.params: list[np.ndarray | None] = [None] * n
-        #: d(lock value)/d theta of each locked joint
-        self.dL: dict[str, np.ndarray] = {}
-        self.tau: list[np.ndarray] = []
-        self.nfev = 0
-        self.notes: list[str] = []
-
-    # ---- helpers
-    def limit_derivative(self, joint: str, side: str) -> np.ndarray:
-        d = np.zeros(self.P)
-        path = f"joints.{joint}.limits.{side}"
-        if path in self.model.theta_paths:
-            d[self.model.theta_paths.index(path)] = 1.0
-        return d
-
-    def dp_of(self, p: np.ndarray) -> np.ndarray:
-        """d p / d theta of a configuration's parameter vector: its lock values'."""
-        model = self.model
-        nl = len(model.locks)
-        out = np.zeros((model.n_params, self.P))
-        for k, j in enumerate(model.locks):
-            if p[k] == 1.0:
-                out[nl + k] = self.dL[j]
-        return out
-
-    def kkt_d(self, q, v, t, p, dP, sq, sv):
-        """(a, lambda), their total derivatives (nq + m, P) from (s_q, s_v, dP), and
-        their time derivatives along the flow (nq + m,)."""
-        model = self.model
-        a, lam, _ = model.kkt(q, v, t, p)
-        z = np.concatenate([a, lam])
-        K, Rq, Rv, Rt, Rp, Rth = self.eq.kkt(q, v, t, p, self.th, z)
-        rhs = Rq @ sq + Rv @ sv + Rp @ dP + Rth
-        dz = -np.linalg.solve(K, rhs)
-        zdot = -np.linalg.solve(K, Rq @ v + Rv @ a + Rt.ravel())
-        return a, lam, dz, zdot
-
-    def project(self, q, v, t, p, dP, sq, sv):
-        """Sensitivities made consistent with the active constraints at fixed time (the
-        derivative of the run's own projections at a segment start)."""
-        act = self.model.active_rows(p)
-        if act.size == 0:
-            return sq, sv
-        _, Phi_q, _, Phi_p, Phi_th = self.eq.pos(q, t, p, self.th)
-        A = Phi_q[act]
-        r = A @ sq + (Phi_p @ dP + Phi_th)[act]
-        sq = sq - np.linalg.lstsq(A, r, rcond=None)[0]
-        _, h_q, _, h_p, h_th = self.eq.vel(q, v, t, p, self.th)
-        r = h_q[act] @ sq + A @ sv + (h_p @ dP + h_th)[act]
-        sv = sv - np.linalg.lstsq(A, r, rcond=None)[0]
-        return sq, sv
-
-    # ---- the start
-    def start(self, q0: np.ndarray, v0: np.ndarray, start_events) -> tuple:
-        model, mech = self.model, self.model.mech
-        known, rates = start_spec(mech)
-        p0 = model.params()
-        act = model.active_rows(p0)
-        paths = model.theta_paths
-
-        def d_of(prefix: str, names) -> np.ndarray:
-            out = np.zeros((len(names), self.P))
-            for i, n in enumerate(names):
-                if f"{prefix}.{n}" in paths:
-                    out[i, paths.index(f"{prefix}.{n}")] = 1.0
-            return out
-
-        kidx = [model.jidx[n] for n in known]
-        _, Phi_q, _, Phi_p, Phi_th = self.eq.pos(q0, 0.0, p0, self.th)
-        _, cd, c_q, cd_q = self.eq.coords(q0, v0)
-        G_q = np.vstack([Phi_q[act], c_q[kidx]])
-        G_th = np.vstack([Phi_th[act], -d_of("initial.joints", list(known))])
-        sq = -np.linalg.lstsq(G_q, G_th, rcond=None)[0]
-        ridx = [model.jidx[n] for n in rates]
-        _, h_q, _, _, h_th = self.eq.vel(q0, v0, 0.0, p0, self.th)
-        V_v = np.vstack([Phi_q[act], c_q[ridx]])
-        V_q = np.vstack([h_q[act], cd_q[ridx]])
-        V_th = np.vstack([h_th[act], -d_of("initial.velocities", list(rates))])
-        sv = -np.linalg.lstsq(V_v, V_q @ sq + V_th, rcond=None)[0]
-        for e in start_events:  # locks on a stop or sticking at t = 0
-            if e.kind == "lock":
-                self.dL[e.joint] = self.limit_derivative(e.joint, e.side)
-            elif e.kind == "stick":
-                self.dL[e.joint] = c_q[model.jidx[e.joint]] @ sq
-        return sq, sv
-
-    # ---- a segment
-    def segment(self, seg: SegmentTrace, sq: np.ndarray, sv: np.ndarray):
-        """Integrate the state and its sensitivities through one traced segment; returns
-        (q, v, s_q, s_v) at its end (before any event)."""
-        model, eq = self.model, self.eq
-        nq, m, N, P = model.nq, model.m, model.N, self.P
-        p = seg.p
-        dP = self.dp_of(p)
-        t0 = seg.t0
-        q = ev.project_positions(model, seg.q, t0, p)
-        v = ev.project_velocities(model, q, seg.v, t0, p)
-        sq, sv = self.project(q, v, t0, p, dP, sq, sv)
-        a, lam, dz, _ = self.kkt_d(q, v, t0, p, dP, sq, sv)
-        times = self.res.t[seg.n0:seg.n1]
-        for i in range(seg.n0, seg.n1):
-            self.dP[i], self.params[i] = dP, p
-        if times.size == 0:
-            return q, v, sq, sv
-        S0 = np.zeros((N, P))
-        S0[:nq], S0[nq:2 * nq], S0[2 * nq:2 * nq + m] = sq, sv, dz[nq:]
-        Sp0 = np.zeros((N, P))
-        Sp0[:nq], Sp0[nq:2 * nq] = sv, dz[:nq]
-        y0 = np.concatenate([q, v, lam, np.zeros(m)])
-        yp0 = np.concatenate([v, a, np.zeros(2 * m)])
-        Y0 = np.concatenate([y0, S0.ravel(order="F")])
-        Yp0 = np.concatenate([yp0, Sp0.ravel(order="F")])
-        dPv = dP.ravel(order="F")
-        th = self.th
-        t_arr, cj_arr = np.zeros(1), np.zeros(1)
-        n_all = Y0.size
-        y_in, yp_in, r_out = np.zeros(n_all), np.zeros(n_all), np.zeros(n_all)
-        res = Buffered(eq.res)
-        for i, arr in enumerate((t_arr, y_in, yp_in, p, dPv, th)):
-            res.bind(i, arr)
-        res.bind_out(0, r_out)
-        jac = Buffered(eq.jac)
-        for i, arr in enumerate((t_arr, y_in, yp_in, cj_arr, p, dPv, th)):
-            jac.bind(i, arr)
-        bound = [None]
-
-        def resfn(t, y, yp, out):
-            t_arr[0] = t
-            y_in[:] = y
-            yp_in[:] = yp
-            res.run()
-            out[:] = r_out
-
-        def jacfn(t, y, yp, rr, cj, JJ):
-            t_arr[0], cj_arr[0] = t, cj
-            y_in[:] = y
-            yp_in[:] = yp
-            if JJ is not bound[0]:
-                jac.bind_out(0, JJ)
-                bound[0] = JJ
-            jac.run()
-
-        scale = np.maximum(np.abs(th), 1e-300)
-        scale[th == 0.0] = 1.0
-        base = np.concatenate([np.full(2 * nq, self.atol), np.full(m, ATOL_LAMBDA),
-                               np.full(m, ATOL_MU)])
-        # the multipliers' sensitivities stay out of the error test (index-2 variables:
-        # in it, IDA failed to converge at rtol 1e-12 on the double-folded mechanism)
-        off = np.concatenate([np.zeros(2 * nq), np.full(2 * m, ATOL_OFF)])
-        alg = [k for i in range(P + 1) for k in range(i * N + 2 * nq, (i + 1) * N)]
-        # the output times, each a clear step after the one before (a sample a hair after
-        # another, next to an event, is read from its neighbour below)
-        want: list[float] = []
-        for x in times:
-            near = ev.ZENO_DT * max(1.0, abs(x))
-            if want and x - want[-1] <= near:
-                want[-1] = x  # the later one: the segment's end stays an output
-            elif want or x - t0 > near:
-                want.append(x)
-        if not want:  # a segment of no length: the state and sensitivities as they start
-            self.sq[seg.n0:seg.n1], self.sv[seg.n0:seg.n1] = sq, sv
-            return q, v, sq, sv
-        tspan = np.concatenate([[t0], want])
-        extra = None
-        if tspan.size == 2:  # scikit-sundae returns its own steps for two points
-            extra = 0.5 * (tspan[0] + tspan[1])
-            tspan = np.array([tspan[0], extra, tspan[1]])
-        for control in ((True, False) if self.error_control else (False,)):
-            atol = np.concatenate([base] + [np.maximum(base / scale[i] * (1.0 if control
-                                                                          else LOOSE), off)
-                                            for i in range(P)])
-            solver = sun.ida.IDA(resfn, jacfn=jacfn, rtol=self.rtol, atol=atol,
-                                 algebraic_idx=alg, max_num_steps=10**7)
-            r = solver.solve(tspan, Y0, Yp0)
-            self.nfev += int(r.nfev)
-            if r.status >= 0 or not control:
-                break
-            # a restart just after an impact can fail the error test on the jumped
-            # sensitivities alone: the segment again with them following the state's steps
-            self.notes.append(f"segment from t = {t0:.9g} s: the sensitivities were left "
-                              "out of the error test (IDA failed with them in it)")
-        if r.status < 0:
-            raise SolverError(f"the sensitivity integration failed at t = {r.t[-1]:.9g} s: "
-                              f"IDA: {r.message}", status=Status.INTEGRATOR)
-        Y = np.asarray(r.y)
-        T = np.asarray(r.t)
-        if extra is not None:
-            Y, T = Y[[0, 2]], T[[0, 2]]
-        Y, T = Y[1:], T[1:]
-        if T.size != len(want):
-            raise SolverError(f"the sensitivity integration returned {T.size} of "
-                              f"{len(want)} output times in the segment from t = {t0:.9g} s",
-                              status=Status.INTEGRATOR)
-        S = Y[:, N:].reshape(-1, P, N).transpose(0, 2, 1)  # (n, N, P)
-        # each sample from the nearest output (the same time but for merged neighbours)
-        hi = np.clip(np.searchsorted(T, times), 0, T.size - 1)
-        lo = np.clip(hi - 1, 0, T.size - 1)
-        idx = np.where(np.abs(T[lo] - times) < np.abs(T[hi] - times), lo, hi)
-        self.sq[seg.n0:seg.n1] = S[idx, :nq]
-        self.sv[seg.n0:seg.n1] = S[idx, nq:2 * nq]
-        return (Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), S[-1, :nq].copy(),
-                S[-1, nq:2 * nq].copy())
-
-    # ---- events
-    def events(self, seg: SegmentTrace, q, v, sq, sv, n: int):
-        """Apply the traced events at the segment's end; returns (s_q, s_v, next sample
-        index)."""
-        model, eq = self.model, self.eq
-        t = seg.t1
-        p = seg.p
-        dP = self.dp_of(p)
-        for trig, done, p_after in seg.groups:
-            if not done:
-                continue
-            # the event time's derivative from the function that located it
-            a, lam, dz, zdot = self.kkt_d(q, v, t, p, dP, sq, sv)
-            g, g_q, g_v, g_th, g_l = (np.ravel(x) for x in
-                                      eq.event_function(seg, trig)(q, v, self.th, lam))
-            nq = model.nq
-            num = g_q @ sq + g_v @ sv + g_th + g_l @ dz[nq:]
-            rate = float(g_q @ v + g_v @ a + g_l @ zdot[nq:])
-            if rate == 0.0 or not math.isfinite(rate):
-                raise SolverError(f"the event at t = {t:.9g} s is grazing (its event "
-                                  "function has zero rate): its time is not "
-                                  "differentiable", status=Status.NUMERICAL)
-            tau = -num.ravel() / rate
-            zq, zv = sq + np.outer(v, tau), sv + np.outer(a, tau)
-            for tr, pa in zip(done, p_after, strict=True):
-                e = tr.event
-                if e.kind == "singular":
-                    raise CmmError("sensitivities through a singular position are not "
-                                   "defined (the branch is a discrete choice)")
-                if e.kind in ("lock", "limit", "bounce", "stick"):
-                    zq, zv = self._impact(e, tr, v, t, p, dP, pa, zq, zv, tau)
-                p = pa
-                dP = self.dp_of(p)
-                a1, _, _, _ = self.kkt_d(tr.q, tr.v, t, p, dP, zq, zv)
-                q, v = tr.q, tr.v
-                sq, sv = zq - np.outer(v, tau), zv - np.outer(a1, tau)
-                self.tau.append(tau)
-                self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
-                n += 1
-        return q, v, sq, sv, n
-
-    def _impact(self, e, tr, vm, t, p_before, dP_before, p_after, zq, zv, tau):
-        """Derivative of the impact map (and of the projection onto the new lock)."""
-        model, eq = self.model, self.eq
-        j = e.joint
-        k = model.locks.index(j)
-        nl = len(model.locks)
-        jk = model.jidx[j]
-        if e.kind == "stick":
-            p_lock = p_after
-            self.dL[j] = eq.coords(tr.q, tr.v)[2][jk] @ zq
-        else:
-            p_lock = p_before.copy()
-            p_lock[k] = 1.0
-            p_lock[nl + k] = model.mech.joints[j].limits.lower if e.side == "lower" else \
-                model.mech.joints[j].limits.upper
-            self.dL[j] = self.limit_derivative(j, e.side)
-        dPl = dP_before.copy()
-        dPl[nl + k] = self.dL[j]
-        q = tr.q
-        # positions: onto the stop (first-order consistent already; this removes drift)
-        act = model.active_rows(p_lock)
-        _, Phi_q, Phi_t, Phi_p, Phi_th = eq.pos(q, t, p_lock, self.th)
-        A = Phi_q[act]
-        r = A @ zq + np.outer(Phi_t[act], tau) + (Phi_p @ dPl + Phi_th)[act]
-        zq = zq - np.linalg.lstsq(A, r, rcond=None)[0]
-        # velocities: the impact map's derivative
-        row = model.n_fixed + k
-        erow = np.zeros(model.m)
-        erow[row] = 1.0
-        oh = np.zeros(len(model.joint_names))
-        oh[jk] = 1.0
-        if e.kind == "bounce":
-            tgt, t_q, t_v, t_th = eq.tgt(q, vm, self.th, oh)
-            tgt = tgt.item()
-        else:
-            tgt, t_q, t_v, t_th = 0.0, np.zeros((1, model.nq)), np.zeros((1, model.nq)), \
-                np.zeros((1, self.P))
-        vp, _ = ev.impact_map(model, q, vm, t, p_lock, row, tgt)
-        _, Lam = ev.impact_map(model, q, vm, t, p_lock, row, tgt)
-        z = np.concatenate([vp, Lam])
-        K, Rq, Rv, Rt, Rp, Rth, Rtg = eq.imp(q, vm, t, p_lock, self.th, erow, tgt, z)
-        dtg = (np.reshape(t_q, (1, -1)) @ zq + np.reshape(t_v, (1, -1)) @ zv).ravel() \
-            + np.ravel(t_th)
-        rhs = Rq @ zq + Rv @ zv + np.outer(Rt, tau) + Rp @ dPl + Rth + np.outer(Rtg, dtg)
-        dz = -np.linalg.solve(K, rhs)
-        return zq, dz[:model.nq]
-
-    # ---- outputs
-    def outputs(self) -> dict[str, np.ndarray]:
-        model, eq, res = self.model, self.eq, self.res
-        n, nq, P = res.t.size, model.nq, self.P
-        nj, nd = len(model.joint_names), len(model.driver_names)
-        out = np.zeros((n, eq.n_out, P))
-        for i in range(n):
-            p = self.params[i]
-            if p is None:
-                continue
-            q, v, t = res.data["q"][i], res.data["v"][i], float(res.t[i])
-            sq, sv, dP = self.sq[i], self.sv[i], self.dP[i]
-            a, lam, dz, _ = self.kkt_d(q, v, t, p, dP, sq, sv)
-            _, O_q, O_v, O_a, O_th, O_l = eq.out(q, v, a, p, self.th, lam)
-            out[i] = O_q @ sq + O_v @ sv + O_a @ dz[:nq] + O_l @ dz[nq:] + O_th
-        o = 0
-        d = {}
-        for key, w in (("c", nj), ("cd", nj), ("cdd", nj), ("jforce", 2 * nj),
-                       ("jtorque", nj), ("effort", nd)):
-            d[key] = out[:, o:o + w]
-            o += w
-        d["jforce"] = d["jforce"].reshape(n, nj, 2, P)
-        d["q"], d["v"] = self.sq, self.sv
-        return d
-
 
 def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *,
                   error_control: bool = False, rtol: float = 1e-8, atol: float = 1e-10,
@@ -681,7 +191,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     error_control : bool
         Keep the position and velocity sensitivities in IDA's error test (scaled by each
         parameter's size, as IDAS does). Off by default: the sensitivities are then held to
-        a tolerance 1000 times looser (:data:`LOOSE`), which kept the cost near a plain
+        a tolerance 1000 times looser (``sensitivity_pass.LOOSE``), which kept the cost near a plain
         run's where full error control took 110 times the residual evaluations (a
         redesigned double-folded mechanism with a soft spring at D).
     rtol, atol, output_dt, **run_options
@@ -718,7 +228,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     if why is not None:
         raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),
                          mech.source)
-    eq = _Equations(model)
+    eq = Equations(model)
     unused = [x for i, x in enumerate(paths + solved) if not x.startswith(("initial.", "joints."))
               and not ca.depends_on(model.sym["F"], model.theta[i])]
     if unused:
@@ -727,7 +237,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     trace: list = []
     res = simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                    model=model, _trace=trace, **run_options)
-    sp = _Pass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
+    sp = SensitivityPass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
     q0, v0, start_events = trace[0]
     sq, sv = sp.start(q0, v0, start_events)
     sp.sq[0], sp.sv[0] = sq, sv
@@ -770,4 +280,5 @@ def _through_equilibrium(model: Model, ev_t: np.ndarray, data: dict[str, np.ndar
         return x[..., :n] + x[..., n:] @ d_solved
 
     return total(ev_t), {k: total(v) for k, v in data.items()}
+
 
