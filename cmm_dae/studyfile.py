@@ -88,9 +88,13 @@ def design_spec(path: str | Path) -> dict[str, Any]:
     out = path.parent / str(data.get("out", "design_report"))
 
     def run_design() -> Design:
-        return design(mech, [p["path"] for p in params], [tuple(p["bounds"]) for p in params],
-                      data.get("objective", "peak_effort"), targets, float(t_end),
-                      driver=data.get("driver"), method=data.get("method", "SLSQP"),
-                      max_iter=int(data.get("max_iter", 50)), **run)
+        try:
+            return design(mech, [p["path"] for p in params],
+                          [tuple(p["bounds"]) for p in params],
+                          data.get("objective", "peak_effort"), targets, float(t_end),
+                          driver=data.get("driver"), method=data.get("method", "SLSQP"),
+                          max_iter=int(data.get("max_iter", 50)), **run)
+        except ModelError as e:  # the study file's keys, named in it
+            raise ModelError(e.problems, src) from None
 
     return {"out": out, "run_design": run_design}

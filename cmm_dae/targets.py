@@ -18,6 +18,8 @@ from .sensitivity import Sensitivities
 __all__ = ["Target", "parse_target"]
 
 
+#: The kinds of events (as in the event log) a target may name.
+KINDS = ("limit", "lock", "bounce", "release", "stick", "slip", "zone")
 #: The series a target may name: (table, series) -> accessor names.
 _SERIES = {("joint", "position"), ("joint", "velocity"), ("joint", "acceleration"),
            ("joint", "torque"), ("driver", "effort")}
@@ -61,8 +63,8 @@ class Target:
             if len(hits) < self.occurrence:
                 seq = ", ".join(f"{e.kind} {e.joint} at {e.t:.4g} s" for e in res.events)
                 raise CmmError(f"target '{self.label}': the run has {len(hits)} '{kind} "
-                               f"{joint}' event(s) (events: {seq or 'none'}); the event "
-                               "sequence changed with the parameters")
+                               f"{joint}' event(s) (events: {seq or 'none'}); a target "
+                               "needs its event in every run of the study")
             i = hits[self.occurrence - 1]
             return float(res.events[i].t), s.event_times[i].copy()
         table, name, what = self.series.split(" ")
@@ -94,10 +96,11 @@ def parse_target(x: Any, i: int, mech: Mechanism) -> Target:
                                  "'series'"), mech.source)
     if t.event is not None:
         parts = str(t.event).split(" ")
-        if len(parts) != 2 or parts[1] not in mech.joints:
-            raise ModelError(Problem("design", key, f"'event' must be 'KIND JOINT' with a "
-                                     f"joint of the mechanism (e.g. 'limit E'), got "
-                                     f"{t.event!r}"), mech.source)
+        if len(parts) != 2 or parts[1] not in mech.joints or parts[0] not in KINDS:
+            raise ModelError(Problem("design", key, f"'event' must be 'KIND JOINT' with KIND "
+                                     f"one of {', '.join(KINDS)} and a joint of the "
+                                     f"mechanism (e.g. 'limit E'), got {t.event!r}"),
+                             mech.source)
         if not isinstance(t.occurrence, int) or t.occurrence < 1:
             raise ModelError(Problem("design", key, "'occurrence' must be an integer >= 1"),
                              mech.source)

@@ -57,6 +57,8 @@ def test_bad_design_input_is_named(mech):
         cd.design(mech, PARAMS, b, constraints=[{"event": "limit E", "time": 2.5}])
     with pytest.raises(ModelError, match="KIND JOINT"):
         cd.design(mech, PARAMS, b, constraints=[{"event": "limit Z", "value": 2.5}])
+    with pytest.raises(ModelError, match="KIND JOINT.*'jam E'"):
+        cd.design(mech, PARAMS, b, constraints=[{"event": "jam E", "value": 2.5}])
     with pytest.raises(ModelError, match="3 \\(lower, upper\\) pairs"):
         cd.design(mech, PARAMS, b[:2], constraints=TARGETS)
     with pytest.raises(ModelError, match="lower < upper"):
