@@ -326,9 +326,7 @@ class SensitivityPass:
         else:
             tgt, t_q, t_v, t_th = 0.0, np.zeros((1, model.nq)), np.zeros((1, model.nq)), \
                 np.zeros((1, self.P))
-        vp, _ = ev.impact_map(model, q, vm, t, p_lock, row, tgt)
-        _, Lam = ev.impact_map(model, q, vm, t, p_lock, row, tgt)
-        z = np.concatenate([vp, Lam])
+        z = np.concatenate(ev.impact_map(model, q, vm, t, p_lock, row, tgt))
         K, Rq, Rv, Rt, Rp, Rth, Rtg = eq.imp(q, vm, t, p_lock, self.th, erow, tgt, z)
         dtg = (np.reshape(t_q, (1, -1)) @ zq + np.reshape(t_v, (1, -1)) @ zv).ravel() \
             + np.ravel(t_th)
