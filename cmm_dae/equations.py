@@ -36,6 +36,12 @@ from .params import param_value, symbolic
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
 
 
+def kkt_blocks(mass, Phi_q, free):
+    """The KKT matrix ``[[M, Phi_q^T], [Phi_q, D]]`` for CasADi expressions (``mass`` the
+    diagonal of M, ``free`` that of D: 1 on inactive lock rows)."""
+    return ca.blockcat([[ca.diag(mass), Phi_q.T], [Phi_q, ca.diag(free)]])
+
+
 def _rot(th):
     c, s = ca.cos(th), ca.sin(th)
     return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
@@ -297,7 +303,8 @@ class Model:
         #: the symbolic equations with the parameters theta free (sensitivities)
         self.sym = {"q": q, "v": v, "a": a, "t": t, "p": p, "theta": self.theta,
                     "phi": phi, "Phi_q": Phi_q, "Phi_t": Phi_t, "h": h, "gamma": gamma,
-                    "Qf": Qf, "c": c, "cdot": cdot, "c_q": c_q, "free": free, "mass": Mdiag,
+                    "Qf": Qf, "c": c, "cdot": cdot, "c_q": c_q, "cddot": cddot, "free": free,
+                    "mass": Mdiag,
                     "P": P, "y": y, "yp": yp, "lam": lam,
                     "F": ggl(Phi_q, Qf, phi, h, Mdiag)}
         if self.theta_paths:  # the numeric functions below hold the parameters' values
@@ -507,8 +514,7 @@ class Model:
         """The KKT matrix and right-hand side of :meth:`kkt` for CasADi symbols (for the
         compiled event functions and iterative step)."""
         Phi_q, Qf, gamma = self.kkt_fn(q, v, t, p)
-        return (ca.blockcat([[ca.diag(ca.DM(self.mass)), Phi_q.T],
-                             [Phi_q, ca.diag(self.free_fn(p))]]), ca.vertcat(Qf, gamma))
+        return kkt_blocks(ca.DM(self.mass), Phi_q, self.free_fn(p)), ca.vertcat(Qf, gamma)
 
     def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:
         nq, m = self.nq, self.m

@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 
 from . import events as ev
-from .equations import Buffered, Model
+from .equations import Buffered, Model, kkt_blocks
 from .hybrid import HybridState, SegmentTrace
 from .mechanism import GROUND
 
@@ -25,7 +25,6 @@ class _Mat(Buffered):
     def __call__(self, *args) -> list[np.ndarray]:
         return [np.reshape(o, s) for o, s in zip(super().__call__(*args), self.shapes,
                                                   strict=True)]
-
 
 
 class Equations:
@@ -54,7 +53,7 @@ class Equations:
         self.jac = ca.Function("sjac", [t, Y, Yp, cj, p, ca.vec(dP), th], [ca.densify(J.T)])
         # --- KKT system K z = r, z = [a; lambda], and its derivatives
         z = ca.SX.sym("z", nq + m)
-        K = ca.blockcat([[ca.diag(sy["mass"]), sy["Phi_q"].T], [sy["Phi_q"], ca.diag(sy["free"])]])
+        K = kkt_blocks(sy["mass"], sy["Phi_q"], sy["free"])
         R = K @ z - ca.vertcat(sy["Qf"], sy["gamma"])
         dn = ca.densify
         self.kkt = _Mat(ca.Function("skkt", [q, v, t, p, th, z], [dn(K)] + [
@@ -97,11 +96,9 @@ class Equations:
         definitions: force of the first body on the second at the second's point)."""
         model = self.model
         sy = model.sym
-        q, v, a = sy["q"], sy["v"], sy["a"]
-        c_q, cd = sy["c_q"], sy["cdot"]
-        cdd = c_q @ a + ca.jacobian(cd, q) @ v
+        q = sy["q"]
         Phi_q = sy["Phi_q"]
-        G_all, fx, fy, tq = [], [], [], []
+        fx, fy, tq = [], [], []
         Pts = sy["P"]
         for k, (name, j) in enumerate(model.mech.joints.items()):
             rows = model.rows_of("joint", name) + model.rows_of("lock", name)
@@ -121,10 +118,9 @@ class Equations:
                 fy.append(-F[1])
                 d = rb - ref
                 tq.append(-(Mc + (d[0] * F[1] - d[1] * F[0])))
-            G_all.append(G)
         eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
         force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
-        return ca.vertcat(sy["c"], cd, cdd, force, *tq, *eff)
+        return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, *tq, *eff)
 
     def event_function(self, seg: SegmentTrace, trig: ev.Trigger) -> Buffered:
         """The event function of ``trig`` in segment ``seg``'s configuration, as the

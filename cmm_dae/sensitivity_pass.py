@@ -53,9 +53,10 @@ class SensitivityPass:
         self.notes: list[str] = []
 
     # ---- helpers
-    def limit_derivative(self, joint: str, side: str) -> np.ndarray:
+    def unit(self, path: str) -> np.ndarray:
+        """d value / d theta of a model value that is itself a parameter or a constant:
+        the unit vector of ``path`` among the parameters (zeros when it is not one)."""
         d = np.zeros(self.P)
-        path = f"joints.{joint}.limits.{side}"
         if path in self.model.theta_paths:
             d[self.model.theta_paths.index(path)] = 1.0
         return d
@@ -103,14 +104,9 @@ class SensitivityPass:
         known, rates = start_spec(mech)
         p0 = model.params()
         act = model.active_rows(p0)
-        paths = model.theta_paths
 
         def d_of(prefix: str, names) -> np.ndarray:
-            out = np.zeros((len(names), self.P))
-            for i, n in enumerate(names):
-                if f"{prefix}.{n}" in paths:
-                    out[i, paths.index(f"{prefix}.{n}")] = 1.0
-            return out
+            return np.array([self.unit(f"{prefix}.{n}") for n in names]).reshape(-1, self.P)
 
         kidx = [model.jidx[n] for n in known]
         _, Phi_q, _, Phi_p, Phi_th = self.eq.pos(q0, 0.0, p0, self.th)
@@ -126,7 +122,7 @@ class SensitivityPass:
         sv = -np.linalg.lstsq(V_v, V_q @ sq + V_th, rcond=None)[0]
         for e in start_events:  # locks on a stop or sticking at t = 0
             if e.kind == "lock":
-                self.dL[e.joint] = self.limit_derivative(e.joint, e.side)
+                self.dL[e.joint] = self.unit(f"joints.{e.joint}.limits.{e.side}")
             elif e.kind == "stick":
                 self.dL[e.joint] = c_q[model.jidx[e.joint]] @ sq
         return sq, sv
@@ -304,7 +300,7 @@ class SensitivityPass:
             p_lock[k] = 1.0
             p_lock[nl + k] = model.mech.joints[j].limits.lower if e.side == "lower" else \
                 model.mech.joints[j].limits.upper
-            self.dL[j] = self.limit_derivative(j, e.side)
+            self.dL[j] = self.unit(f"joints.{j}.limits.{e.side}")
         dPl = dP_before.copy()
         dPl[nl + k] = self.dL[j]
         q = tr.q
