@@ -89,7 +89,8 @@ class Event:
         for an instant, ``side`` the branch rule, ``"continue"``): the dependent
         constraints, the rank drop and the continuity of the velocities. Its
         ``velocity_before``/``after`` are the norms of the body velocities where the
-        crossing began and ended, and ``joint`` the first joint among the dependent ones.
+        crossing began and ended, ``joint`` the first joint among the dependent ones and
+        ``energy_lost`` 0 (the motion is continuous through it).
     """
 
     t: float
