@@ -9,8 +9,11 @@ from .equations import Model
 
 
 # ------------------------------------------------------------------- geometry
-def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> np.ndarray:
-    """Minimal-norm Newton projection of q onto the active position constraints."""
+def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                      rcond: float | None = None) -> np.ndarray:
+    """Minimal-norm Newton projection of q onto the active position constraints
+    (``rcond``: singular values below it relative to the largest count as zero, for a
+    projection at a singular position)."""
     act = model.active_rows(p)
     for _ in range(10):
         con = model.constraints(q, t, p)
@@ -18,18 +21,19 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> n
         if np.max(np.abs(r), initial=0.0) < 1e-15:
             break
         # least squares: a new lock may make the rows dependent until a jam is resolved
-        q = q - np.linalg.lstsq(con.Phi_q[act], r, rcond=None)[0]
+        q = q - np.linalg.lstsq(con.Phi_q[act], r, rcond=rcond)[0]
     return q
 
 
-def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
-                       ) -> np.ndarray:
-    """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows)."""
+def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+                       rcond: float | None = None) -> np.ndarray:
+    """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows; ``rcond``
+    as in :func:`project_positions`)."""
     act = model.active_rows(p)
     con = model.constraints(q, t, p)
     J = con.Phi_q[act]
     r = J @ v + con.Phi_t[act]
-    return v - np.linalg.lstsq(J, r, rcond=None)[0]
+    return v - np.linalg.lstsq(J, r, rcond=rcond)[0]
 
 
 def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,

@@ -321,7 +321,8 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
                     after: list[int]) -> tuple[float, np.ndarray, np.ndarray]:
     """Cross the singular position ahead of (t, q, v): the state after it, one sample
     there and a "singular" event at the singular instant."""
-    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch)
+    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
+                   atol=opts.atol)
     cfg = hs.current()
     if events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
         # the integrator could not restart where the last crossing ended: the same

@@ -57,6 +57,13 @@ END_RATIO = 0.03
 PAST_RATIO = 0.1
 #: The crossing ends where the singular-value ratio is this many times the one at its start.
 AFTER = 12.0
+#: Relative singular value counted as zero by the projections at the singular instant.
+SINGULAR_RCOND = 1e-8
+#: Most Gauss steps on the way out at the accurate step length (longer steps beyond).
+MAX_STEPS_OUT = 2000
+#: Share of the tolerance a Gauss step's local error may take (the steps of a crossing
+#: follow each other without an error test of their own).
+SAFETY = 0.25
 
 
 @dataclass(frozen=True)
@@ -114,13 +121,36 @@ def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     return q + h * (_B @ V), v + h * (_B @ K), K[1]
 
 
-def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
-             ) -> tuple[np.ndarray, np.ndarray, float]:
+def _accurate_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                   h: float, guess: np.ndarray, rtol: float, atol: float) -> float:
+    """The longest Gauss step from (t, q, v) whose local error meets the tolerances, s.
+
+    The error of one step of ``h`` is estimated by step doubling (two steps of h / 2 are
+    16 / 15 of the way to the exact solution, the method being of order 4) in IDA's
+    weighted root-mean-square norm; the step then scales with the error's fifth root,
+    from a tenth to ten times ``h``."""
+    try:
+        q1, v1, _ = _gl2_step(model, p, t, q, v, h, guess)
+        qa, va, g = _gl2_step(model, p, t, q, v, 0.5 * h, guess)
+        q2, v2, _ = _gl2_step(model, p, t + 0.5 * h, qa, va, 0.5 * h, g)
+    except np.linalg.LinAlgError:
+        return h
+    y1, y2 = np.concatenate([q1, v1]), np.concatenate([q2, v2])
+    err = 16.0 / 15.0 * float(np.sqrt(np.mean(((y2 - y1) / (rtol * np.abs(y2) + atol)) ** 2)))
+    if not err > 0.0:
+        return 10.0 * h
+    return h * float(np.clip((SAFETY / err) ** 0.2, 0.1, 10.0))
+
+
+def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float,
+             rcond: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """Minimum-norm corrections onto the constraints (the kinematics' projections); the
-    largest position change."""
-    q1 = project_positions(model, q, t, p)
-    return q1, project_velocities(model, q1, v, t, p), float(np.max(np.abs(q1 - q),
-                                                                    initial=0.0))
+    largest position change. At the singular instant itself pass ``rcond``: the
+    collapsing singular value then counts as zero instead of amplifying the round-off
+    (its inverse moved the velocities by 2e-3 relative there)."""
+    q1 = project_positions(model, q, t, p, rcond)
+    return q1, project_velocities(model, q1, v, t, p, rcond), float(np.max(np.abs(q1 - q),
+                                                                           initial=0.0))
 
 
 def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
@@ -193,7 +223,8 @@ def _choose(model: Model, v: np.ndarray, others: list[np.ndarray], q: np.ndarray
 
 
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-              t_end: float, rule: tuple[str, int] | None = None) -> Crossing:
+              t_end: float, rule: tuple[str, int] | None = None, *, rtol: float = 1e-8,
+              atol: float = 1e-10) -> Crossing:
     """Cross the singular position ahead of the state (t, q, v) on the branch of the motion.
 
     Parameters
@@ -210,6 +241,9 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         None: the branch of the motion. Else the branch on which that joint's coordinate
         moves with that sign (+1 or -1), the branch of the motion if it does (only where
         one loop is singular: a rank drop of 1).
+    rtol, atol : float
+        The run's tolerances: the Gauss steps are no longer than a step whose local error
+        (by step doubling at the start) meets them, as IDA's steps do.
 
     Returns
     -------
@@ -250,6 +284,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         tau, r_min, t_s = 0.0, r0, t - min(tau_back, t)
         nsub = 0
         h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
+        h_ok = h = min(h, _accurate_step(model, p, t, q, v, h, a0, rtol, atol))
     else:
         tau_lin = r0 / -rate
         opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
@@ -268,7 +303,8 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         # accelerations are dominated by the round-off the near-singular solve amplifies
         # (the node nearest it lies 0.211 h away, where the ratio is about
         # r0 * 0.211 / nsub).
-        nsub = min(SUBSTEPS, int(r0 * 0.211 / NODE_RATIO))
+        h_ok = _accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
+        nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / NODE_RATIO))
         if nsub >= 2:
             h = tau / nsub
         else:
@@ -279,28 +315,36 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             # needed there).
             nsub = 0
             h = (tau + 20.0 * NODE_RATIO / -rate) / _C[0]
+            h_ok = min(h_ok, h)
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
     # restart reliably) would take more than 100 of them: then growing ones.
     target = max(AFTER * r0, END_RATIO, 4.0 * r0) if past else max(AFTER * r0, 0.2 * END_RATIO)
     way_out = (target - r0) / max(abs(rate), 1e-300) + tau
     grow = 1.0 if way_out <= 100 * h else 1.1
+    # never longer than the accurate step (but at most MAX_STEPS_OUT steps out)
+    h_max = max(h_ok, way_out / MAX_STEPS_OUT)
     qq, vv, tt, guess = q, v, t, a0
     switched = False
+    r_prev = 0.0
     try:
-        for k in range(nsub + 200):
+        for k in range(nsub + MAX_STEPS_OUT + 200):
             if tt + h > t_end:
                 h = t_end - tt
             qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
             tt += h
             if k == nsub - 1 and rule is not None:  # at the singular instant: which way
-                qs, vs, _ = _project(model, p, qq, vv, tt)
+                qs, vs, _ = _project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
                 vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs, rule)
                 if switched:  # else the motion goes on undisturbed
                     qq, vv = qs, vnew
             if k >= nsub - 1:
-                if tt >= t_end or _ratio(model, qq, tt, p) >= target:
+                r_now = _ratio(model, qq, tt, p)
+                # out at the target, or where the conditioning is best (it turns down
+                # before the target when the integrator gave up far from the position)
+                if tt >= t_end or r_now >= target or (k > nsub and r_now < r_prev):
                     break
-                h *= grow
+                r_prev = r_now
+                h = min(h * grow, max(h, h_max))
     except np.linalg.LinAlgError as e:
         raise dead(f"the motion cannot be continued through it ({e})") from None
     q1, v1, dq = _project(model, p, qq, vv, tt)
