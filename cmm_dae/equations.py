@@ -142,14 +142,14 @@ class Model:
         def angle(body):
             return 0.0 if body == GROUND else q[3 * self.bidx[body] + 2]
 
-        def point(ref):
+        def point(ref):  # its coordinates may be parameters (symbols in smech)
             body, _ = ref.split(".", 1)
-            local = np.array(mech.point(ref))
+            lx, ly = smech.point(ref)
             if body == GROUND:
-                return ca.DM(local)
+                return ca.vertcat(lx, ly)
             i = self.bidx[body]
-            c = np.array(mech.bodies[body].centroid)
-            return q[3 * i:3 * i + 2] + _rot(q[3 * i + 2]) @ ca.DM(local - c)
+            cx, cy = mech.bodies[body].centroid
+            return q[3 * i:3 * i + 2] + _rot(q[3 * i + 2]) @ ca.vertcat(lx - cx, ly - cy)
 
         coords = []
         rows: list[ca.SX] = []
@@ -185,8 +185,10 @@ class Model:
         self.dropped = tuple(sorted(set(drop)))
         if any(not 0 <= i < n_base for i in self.dropped):
             raise ValueError(f"only joint and driver rows can be dropped, got {drop}")
-        self.base_fn = ca.Function("base", [q, t], [ca.densify(ca.jacobian(
-            ca.vertcat(*rows[:n_base]) if n_base else ca.SX(0, 1), q))])
+        base = ca.jacobian(ca.vertcat(*rows[:n_base]) if n_base else ca.SX(0, 1), q)
+        if self.theta_paths:
+            base = ca.substitute(base, self.theta, ca.DM(self.theta0))
+        self.base_fn = ca.Function("base", [q, t], [ca.densify(base)])
         self.n_base = n_base
         keep = [i for i in range(len(rows)) if i not in self.dropped]
         rows = [rows[i] for i in keep]
@@ -308,9 +310,10 @@ class Model:
                     "P": P, "y": y, "yp": yp, "lam": lam,
                     "F": ggl(Phi_q, Qf, phi, h, Mdiag)}
         if self.theta_paths:  # the numeric functions below hold the parameters' values
-            (phi, Phi_q, Phi_t, h, gamma, Qf, cddot, Mdiag, *ex) = ca.substitute(
-                [phi, Phi_q, Phi_t, h, gamma, Qf, cddot, Mdiag, *el_len, *el_rate, *el_ten,
-                 *load_val, *load_pow], [self.theta], [ca.DM(self.theta0)])
+            (phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag,
+             *ex) = ca.substitute(
+                [phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, *el_len,
+                 *el_rate, *el_ten, *load_val, *load_pow], [self.theta], [ca.DM(self.theta0)])
             ne, nld = len(el_len), len(load_val)
             el_len, el_rate, el_ten = ex[:ne], ex[ne:2 * ne], ex[2 * ne:3 * ne]
             load_val, load_pow = ex[3 * ne:3 * ne + nld], ex[3 * ne + nld:]

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from .errors import ModelError, Problem
-from .mechanism import Damper, Initial, Limits, Mechanism, Spring
+from .mechanism import GROUND, Damper, Initial, Limits, Mechanism, Spring, _frozen
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 #: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
@@ -57,9 +57,35 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
     return None
 
 
+def _point_ref(mech: Mechanism, parts: list[str]) -> str | None:
+    """``"body.point"`` of a point-coordinate path (``bodies.B.points.P.x``,
+    ``ground.points.P.y``) naming an existing point, else None."""
+    if len(parts) == 5 and parts[0] == "bodies" and parts[2] == "points" \
+            and parts[1] in mech.bodies and parts[3] in mech.bodies[parts[1]].points \
+            and parts[4] in ("x", "y"):
+        return f"{parts[1]}.{parts[3]}"
+    if len(parts) == 4 and parts[0] == GROUND and parts[1] == "points" \
+            and parts[2] in mech.ground and parts[3] in ("x", "y"):
+        return f"{GROUND}.{parts[2]}"
+    return None
+
+
+def _point_used(mech: Mechanism, ref: str) -> bool:
+    """Whether a joint, force element or point load is attached at ``ref``."""
+    body, pt = ref.split(".", 1)
+    return any(ref in (j.first, j.second) for j in mech.joints.values()) \
+        or any(ref in (e.first, e.second) for e in mech.elements.values()) \
+        or any(ld.body == body and ld.point == pt for ld in mech.loads.values())
+
+
 def path_problem(mech: Mechanism, path: str) -> Problem | None:
     """Why a dotted path is not a parameter that can be set (None when it is)."""
     parts = path.split(".")
+    ref = _point_ref(mech, parts)
+    if ref is not None:
+        return None if _point_used(mech, ref) else Problem(
+            "sweep", path, f"has no effect: no joint, force element or load is attached at "
+            f"point '{ref}'")
     tables = {k: getattr(mech, k) for k in _TABLES}
     if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
             and ".".join(parts[2:]) in _FIELDS[parts[0]]:
@@ -71,7 +97,7 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
         return None
     return Problem("sweep", path, "not a parameter of the mechanism; e.g. "
                    "joints.D.spring.stiffness, bodies.slider.mass, joints.E.limits.upper, "
-                   "drivers.A.speed")
+                   "drivers.A.speed, bodies.crank.points.B.x, ground.points.O.y")
 
 
 def param_value(mech: Mechanism, path: str) -> float:
@@ -83,6 +109,9 @@ def param_value(mech: Mechanism, path: str) -> float:
         raise ModelError(bad, mech.source)
     if parts[0] == "gravity":
         return mech.gravity["xy".index(parts[1])]
+    ref = _point_ref(mech, parts)
+    if ref is not None:
+        return float(mech.point(ref)["xy".index(parts[-1])])
     if parts[0] == "initial":
         table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
         return float(table.get(parts[2], math.nan))
@@ -101,7 +130,9 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     ``joints.NAME.limits.lower|upper``, ``joints.NAME.friction.static|kinetic``,
     ``drivers.JOINT.speed|initial|amplitude|...``,
     ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
-    ``initial.velocities.NAME``, ``gravity.x|y``.
+    ``initial.velocities.NAME``, ``gravity.x|y``, point coordinates in their frame
+    (link lengths, pivot positions) ``bodies.NAME.points.POINT.x|y`` and
+    ``ground.points.POINT.x|y``, m.
 
     Raises
     ------
@@ -134,9 +165,18 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
     tables = {k: dict(getattr(mech, k)) for k in _TABLES}
     ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
     gravity = list(mech.gravity)
+    ground = dict(mech.ground)
+    points: dict[str, dict] = {}  # body -> its points, where some changed
     for path, value in values.items():
         parts = path.split(".")
-        if parts[0] in tables:
+        if _point_ref(mech, parts) is not None:
+            pts = ground if parts[0] == GROUND else points.setdefault(
+                parts[1], dict(mech.bodies[parts[1]].points))
+            name = parts[-2]
+            xy = list(pts[name])
+            xy["xy".index(parts[-1])] = value
+            pts[name] = tuple(xy)
+        elif parts[0] in tables:
             table = tables[parts[0]]
             obj = table[parts[1]]
             if len(parts) == 3:
@@ -152,8 +192,14 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
             (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
         else:
             gravity["xy".index(parts[1])] = value
+    for body, pts in points.items():
+        b = replace(tables["bodies"][body], points=pts)
+        if not check:  # the constructor makes the points floats
+            object.__setattr__(b, "points", _frozen(pts))
+        tables["bodies"][body] = b
     out = mech.replace(**tables, initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
-                       gravity=tuple(gravity), check=check)
-    if not check:  # the constructor makes the gravity floats
+                       gravity=tuple(gravity), ground=ground, check=check)
+    if not check:  # the constructor makes the gravity and the ground points floats
         object.__setattr__(out, "gravity", tuple(gravity))
+        object.__setattr__(out, "ground", _frozen(ground))
     return out

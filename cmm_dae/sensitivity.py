@@ -185,7 +185,9 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     params : list of str
         Dotted model paths (as in :func:`cmm_dae.with_params`): masses, inertias, spring
         stiffness and rest, damping, stop positions, restitution, friction levels, driver
-        law coefficients, element parameters, initial coordinates and rates, gravity.
+        law coefficients, element parameters, initial coordinates and rates, gravity, point
+        coordinates (link lengths: ``bodies.crank.points.B.x``; pivots:
+        ``ground.points.A.y``), m.
     t_end : float
         End time, s.
     error_control : bool

@@ -80,8 +80,8 @@ class Equations:
             h, ca.jacobian(h, q), sy["Phi_q"], ca.jacobian(h, p), ca.jacobian(h, th))]))
         # --- joint coordinates and rates
         c, cd = sy["c"], sy["cdot"]
-        self.coords = _Mat(ca.Function("scoord", [q, v], [dn(x) for x in (
-            c, cd, sy["c_q"], ca.jacobian(cd, q))]))
+        self.coords = _Mat(ca.Function("scoord", [q, v, th], [dn(x) for x in (
+            c, cd, sy["c_q"], ca.jacobian(cd, q), ca.jacobian(c, th), ca.jacobian(cd, th))]))
         # --- outputs: c, c', c'', joint forces, torques, efforts
         a = sy["a"]
         lam = ca.SX.sym("lamo", m)

@@ -110,21 +110,23 @@ class SensitivityPass:
 
         kidx = [model.jidx[n] for n in known]
         _, Phi_q, _, Phi_p, Phi_th = self.eq.pos(q0, 0.0, p0, self.th)
-        _, cd, c_q, cd_q = self.eq.coords(q0, v0)
+        _, cd, c_q, cd_q, c_th, cd_th = self.eq.coords(q0, v0, self.th)
         G_q = np.vstack([Phi_q[act], c_q[kidx]])
-        G_th = np.vstack([Phi_th[act], -d_of("initial.joints", list(known))])
+        # a joint coordinate depends on the parameters itself where they move its points
+        G_th = np.vstack([Phi_th[act], c_th[kidx] - d_of("initial.joints", list(known))])
         sq = -np.linalg.lstsq(G_q, G_th, rcond=None)[0]
         ridx = [model.jidx[n] for n in rates]
         _, h_q, _, _, h_th = self.eq.vel(q0, v0, 0.0, p0, self.th)
         V_v = np.vstack([Phi_q[act], c_q[ridx]])
         V_q = np.vstack([h_q[act], cd_q[ridx]])
-        V_th = np.vstack([h_th[act], -d_of("initial.velocities", list(rates))])
+        V_th = np.vstack([h_th[act], cd_th[ridx] - d_of("initial.velocities", list(rates))])
         sv = -np.linalg.lstsq(V_v, V_q @ sq + V_th, rcond=None)[0]
         for e in start_events:  # locks on a stop or sticking at t = 0
             if e.kind == "lock":
                 self.dL[e.joint] = self.unit(f"joints.{e.joint}.limits.{e.side}")
             elif e.kind == "stick":
-                self.dL[e.joint] = c_q[model.jidx[e.joint]] @ sq
+                k = model.jidx[e.joint]
+                self.dL[e.joint] = c_q[k] @ sq + c_th[k]
         return sq, sv
 
     # ---- a segment
@@ -294,7 +296,8 @@ class SensitivityPass:
         jk = model.jidx[j]
         if e.kind == "stick":
             p_lock = p_after
-            self.dL[j] = eq.coords(tr.q, tr.v)[2][jk] @ zq
+            co = eq.coords(tr.q, tr.v, self.th)
+            self.dL[j] = co[2][jk] @ zq + co[4][jk]
         else:
             p_lock = p_before.copy()
             p_lock[k] = 1.0

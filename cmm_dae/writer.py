@@ -86,6 +86,15 @@ def write_model(mech: Mechanism, path: str | Path, values: Mapping[str, float], 
             g["xy".index(parts[1])] = x
             data["mechanism"]["gravity"] = g
             continue
+        if (parts[0] == "ground" and parts[1] == "points") or (
+                parts[0] == "bodies" and len(parts) == 5 and parts[2] == "points"):
+            # a point coordinate: one component of the point's [x, y]
+            pts = (data["ground"] if parts[0] == "ground" else data["bodies"][parts[1]]
+                   )["points"]
+            xy = list(pts[parts[-2]])
+            xy["xy".index(parts[-1])] = x
+            pts[parts[-2]] = xy
+            continue
         if parts[0] == "bodies":  # inertia in the file may be about a point: centroidal
             body = data["bodies"][parts[1]]
             body[parts[2]] = x

@@ -67,11 +67,13 @@ def test_bad_design_input_is_named(mech):
 
 def test_model_file_round_trip(mech, tmp_path):
     vals = {"joints.D.spring.stiffness": 0.75, "joints.E.limits.upper": 0.2501,
-            "bodies.coupler.mass": 0.2, "drivers.A.speed": -0.7, "gravity.y": -9.8}
+            "bodies.coupler.mass": 0.2, "drivers.A.speed": -0.7, "gravity.y": -9.8,
+            "bodies.crank.points.B.x": 0.085, "ground.points.rail.y": -0.14}
     out = write_model(cd.with_params(mech, vals), tmp_path / "m.toml", vals)
     back = cd.load(out)
     for p, v in vals.items():
         assert cd.params.param_value(back, p) == v
+    assert back.bodies["crank"].points["B"] == (0.085, 0.0)  # the other component kept
     # the coupler's inertia was given about C: written back as the same centroidal value
     assert back.bodies["coupler"].inertia == pytest.approx(mech.bodies["coupler"].inertia,
                                                            rel=1e-15)
