@@ -1,8 +1,9 @@
 """Sensitivities of every shipped model against central finite differences, and their cost.
 
 For each model and a set of its parameters (a mass, every stop, restitution, spring,
-friction level, driver speed, gravity): d t_event / d p, and the joint positions and
-driving efforts on the output grid (samples more than 20 ms from any event), against
+friction level, driver speed, gravity, a link length, a ground point's height):
+d t_event / d p, and the joint positions and driving efforts on the output grid (samples
+more than 20 ms from any event), against
 Richardson-extrapolated central differences of runs at rtol 1e-12, from two windows
 (relative steps 1e-3 and 1e-4): the smaller disagreement is reported with, in brackets, how
 far the two references differ from each other (their own noise). A parameter whose event
@@ -12,7 +13,7 @@ the largest value of each quantity over the parameter's column ("abs" where that
 plain run at the same tolerance, medians of alternating runs in one process.
 
 Writes validation/out/sensitivities/summary.md.
-Run: python validation/sensitivities.py [--t-end 4] [MODEL ...]
+Run: python validation/sensitivities.py [--t-end 4] [--only points] [MODEL ...]
 """
 
 from __future__ import annotations
@@ -58,6 +59,17 @@ def parameters(m: cd.Mechanism) -> list[str]:
             if d.motion == "constant_speed"]
     if m.gravity[1]:
         out.append("gravity.y")
+    # geometry: the far point of the first link joined to another link (its length) and
+    # the first ground point something is attached at (a pivot's or a guide's height)
+    inner = next((j for j in m.joints.values() if "ground" not in
+                  (j.first.split(".")[0], j.second.split(".")[0])), None)
+    if inner is not None:
+        body, pt = inner.first.split(".", 1)
+        out.append(f"bodies.{body}.points.{pt}.x")
+    grounded = next((r for j in m.joints.values() for r in (j.first, j.second)
+                     if r.startswith("ground.")), None)
+    if grounded is not None:
+        out.append(f"ground.points.{grounded.split('.', 1)[1]}.y")
     return [p for p in out if path_problem(m, p) is None]
 
 
@@ -70,9 +82,11 @@ def quantities(r: cd.Result, grid: np.ndarray) -> dict[str, np.ndarray]:
             else np.zeros(0)}
 
 
-def check(path: Path, t_end: float) -> list[str]:
+def check(path: Path, t_end: float, only: str = "") -> list[str]:
     mech = cd.load(path)
-    params = parameters(mech)
+    params = [p for p in parameters(mech) if only in p]
+    if not params:
+        return []
     try:
         s = cd.sensitivities(mech, params, t_end, **SENS)
     except cd.CmmError as e:
@@ -162,6 +176,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("models", nargs="*", help="model files (default: every shipped model)")
     ap.add_argument("--t-end", type=float, default=4.0, help="simulated time, s (4)")
+    ap.add_argument("--only", default="", metavar="TEXT",
+                    help="only the parameters whose path contains TEXT (e.g. points); "
+                         "writes summary-TEXT.md")
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     paths = [Path(m) for m in args.models] or sorted((ROOT / "models").glob("*.toml"))
@@ -173,11 +190,12 @@ def main() -> None:
              "| model | parameter | run | d t_event | positions | driving efforts |",
              "|---|---|---|---|---|---|"]
     for p in paths:
-        rows = check(p, T_END.get(p.stem, args.t_end))
+        rows = check(p, T_END.get(p.stem, args.t_end), args.only)
         print("\n".join(rows), flush=True)
         lines += rows
-    (OUT / "summary.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {OUT / 'summary.md'}")
+    name = f"summary-{args.only}.md" if args.only else "summary.md"
+    (OUT / name).write_text("\n".join(lines) + "\n")
+    print(f"wrote {OUT / name}")
 
 
 if __name__ == "__main__":
