@@ -147,7 +147,7 @@ def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
     """Minimum-norm corrections onto the constraints (the kinematics' projections); the
     largest position change. At the singular instant itself pass ``rcond``: the
     collapsing singular value then counts as zero instead of amplifying the round-off
-    (its inverse moved the velocities by 2e-3 relative there)."""
+    (its inverse took 3.6e-5 J of 31 J of kinetic energy off a branch switch)."""
     q1 = project_positions(model, q, t, p, rcond)
     return q1, project_velocities(model, q1, v, t, p, rcond), float(np.max(np.abs(q1 - q),
                                                                            initial=0.0))
