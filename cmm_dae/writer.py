@@ -12,6 +12,7 @@ from typing import Any
 
 from .errors import CmmError
 from .mechanism import Mechanism
+from .params import _point_ref
 
 __all__ = ["dumps", "write_model"]
 
@@ -86,8 +87,7 @@ def write_model(mech: Mechanism, path: str | Path, values: Mapping[str, float], 
             g["xy".index(parts[1])] = x
             data["mechanism"]["gravity"] = g
             continue
-        if (parts[0] == "ground" and parts[1] == "points") or (
-                parts[0] == "bodies" and len(parts) == 5 and parts[2] == "points"):
+        if _point_ref(mech, parts) is not None:
             # a point coordinate: one component of the point's [x, y]
             pts = (data["ground"] if parts[0] == "ground" else data["bodies"][parts[1]]
                    )["points"]
