@@ -44,6 +44,11 @@ ATOL_LAMBDA_SINGULAR = 1e3
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
 #: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
 SPARSE_FROM = 300
+#: A failure where the constraints' singular-value ratio is below this and falling along
+#: the motion is handed to the singular-position crossing (which says "dead point" if it
+#: finds no singular instant ahead): at rtol 1e-12 IDA gave up on A02 at ratios up to
+#: 0.052, 0.05 s before the instant.
+FALLING_RATIO = 0.1
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
@@ -408,7 +413,7 @@ class IdaIntegrator(Integrator):
         labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
         # (also a failure very near one, ahead or just past it: the policy tells which)
         if ratio < 0.2 * self.ratio0 or ratio < 0.01 or (
-                ratio < 0.05 and self._ratio_falls(q, tt, ratio)):
+                ratio < FALLING_RATIO and self._ratio_falls(q, tt, ratio)):
             what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")

@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import brentq, minimize_scalar
 
 from .equations import Model
 from .errors import SolverError, Status
@@ -79,6 +79,14 @@ class Crossing:
     ratio_min: float
     velocity_jump: float
     switched: bool = False
+    #: The Gauss steps taken from the state handed over (s), and how many of them end at
+    #: the singular instant (0 when it lay behind): what the sensitivities replay.
+    steps: tuple[float, ...] = ()
+    n_before: int = 0
+    #: The state handed over: time (s), positions, velocities.
+    t0: float = math.nan
+    q0: np.ndarray | None = None
+    v0: np.ndarray | None = None
 
 
 def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
@@ -90,7 +98,8 @@ def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
 
 
 def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-              h: float, guess: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              h: float, guess: np.ndarray, stages: list | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One two-stage Gauss-Legendre step of q' = v, v' = a(t, q, v).
 
     The accelerations are taken at the stage states projected onto the constraints: off
@@ -100,7 +109,8 @@ def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     (which the near-singular solve amplifies to about 1e-9 of their size). ``guess``
     predicts the stage accelerations (never the acceleration at the step's start, which
     may be the singular instant itself, where it is undetermined); returns q, v and the
-    last stage's acceleration (the next step's guess)."""
+    last stage's acceleration (the next step's guess). ``stages``, when given, receives
+    the two projected stage states (t, q, v) of the last iteration."""
     def acc(tt, qq, vv):
         q1, v1, _ = _project(model, p, qq, vv, tt)
         return model.kkt(q1, v1, tt, p)[0]
@@ -118,7 +128,70 @@ def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         if not change < 1e3 * scale:
             raise np.linalg.LinAlgError("the Gauss stages diverge")
     V = v + h * (_A @ K)
+    if stages is not None:
+        Qs = q + h * (_A @ V)
+        stages[:] = [(t + _C[i] * h, *_project(model, p, Qs[i], V[i], t + _C[i] * h)[:2])
+                     for i in range(2)]
     return q + h * (_B @ V), v + h * (_B @ K), K[1]
+
+
+def hermite(t0: float, q0: np.ndarray, v0: np.ndarray, t1: float, q1: np.ndarray,
+            v1: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cubic Hermite interpolant of q with q' = v between two step ends, and its
+    derivative, at t (both O(h^4) and O(h^3) accurate on a smooth motion)."""
+    h = t1 - t0
+    s = (t - t0) / h
+    s2, s3 = s * s, s * s * s
+    q = (2 * s3 - 3 * s2 + 1) * q0 + (s3 - 2 * s2 + s) * h * v0 + (3 * s2 - 2 * s3) * q1 \
+        + (s3 - s2) * h * v1
+    dq = (6 * s2 - 6 * s) / h * (q0 - q1) + (3 * s2 - 4 * s + 1) * v0 + (3 * s2 - 2 * s) * v1
+    return q, dq
+
+
+def null_vectors(model: Model, p: np.ndarray, q: np.ndarray, t: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The left (over all constraint rows, zero on the inactive ones) and right singular
+    vectors of the active constraint Jacobian's smallest singular value at q."""
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
+    U, _, Vt = np.linalg.svd(J)
+    k = min(J.shape) - 1
+    w = np.zeros(model.m)
+    w[act] = U[:, k]
+    return w, Vt[k]
+
+
+def _signed(model: Model, p: np.ndarray, w: np.ndarray, n: np.ndarray, q: np.ndarray,
+            t: float) -> float:
+    """``w . (Phi_q n)``: the smallest singular value with a sign, for w, n held fixed;
+    it passes zero where the motion passes the singular position."""
+    return float(w @ (model.constraints(q, t, p).Phi_q @ n))
+
+
+def singular_instant(model: Model, p: np.ndarray, ends: list, t_guess: float) -> float:
+    """The instant the motion through the step ends ``ends`` [(t, q, v)] passes the
+    singular position: the root of the signed smallest singular value along their
+    Hermite interpolant nearest ``t_guess``, with the null vectors taken again at the root
+    (their error then enters squared); ``t_guess`` where no step brackets one."""
+    i = int(np.argmin([abs(e[0] - t_guess) for e in ends]))
+    t_s = t_guess
+    w, n = null_vectors(model, p, ends[i][1], ends[i][0])
+    for _ in range(3):
+        g = [_signed(model, p, w, n, e[1], e[0]) for e in ends]
+        brackets = [k for k in range(len(ends) - 1) if g[k] * g[k + 1] <= 0.0 and
+                    ends[k + 1][0] > ends[k][0]]
+        if not brackets:
+            return t_s
+        k = min(brackets, key=lambda k: abs(0.5 * (ends[k][0] + ends[k + 1][0]) - t_s))
+        a, b = ends[k], ends[k + 1]
+        if g[k] == 0.0 or g[k + 1] == 0.0:
+            t_s = a[0] if g[k] == 0.0 else b[0]
+        else:
+            t_s = brentq(lambda tt, a=a, b=b, w=w, n=n: _signed(
+                model, p, w, n, hermite(*a, *b, tt)[0], tt), a[0], b[0], xtol=1e-15,
+                rtol=4.0 * np.finfo(float).eps)
+        w, n = null_vectors(model, p, hermite(*a, *b, t_s)[0], t_s)
+    return t_s
 
 
 def _accurate_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
@@ -326,12 +399,16 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     qq, vv, tt, guess = q, v, t, a0
     switched = False
     r_prev = 0.0
+    taken: list[float] = []
+    ends = [(t, q, v)]
     try:
         for k in range(nsub + MAX_STEPS_OUT + 200):
             if tt + h > t_end:
                 h = t_end - tt
             qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
+            taken.append(h)
             tt += h
+            ends.append((tt, qq, vv))
             if k == nsub - 1 and rule is not None:  # at the singular instant: which way
                 qs, vs, _ = _project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
                 vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs, rule)
@@ -363,4 +440,14 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     J = model.constraints(path(tau), t_s, p).Phi_q[model.active_rows(p)]
     s = np.linalg.svd(J, compute_uv=False)
     drop = int(np.sum(s < 0.1 * r0 * s[0])) if s.size else 0
-    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump, switched)
+    if not past:  # the instant along the Gauss steps, not the second-order path ahead
+        t_s = singular_instant(model, p, ends, t_s)
+    elif t_s > 0.0:  # behind the start: one Gauss step back twice as far brackets it
+        back = max(t - 2.0 * (t - t_s), 0.0)
+        try:
+            qb, vb, _ = _gl2_step(model, p, t, q, v, back - t, a0)
+            t_s = singular_instant(model, p, [(back, qb, vb)] + ends, t_s)
+        except np.linalg.LinAlgError:
+            pass  # the extrapolated instant stands
+    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump, switched,
+                    tuple(taken), nsub, t, q.copy(), v.copy())

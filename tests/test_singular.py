@@ -10,6 +10,7 @@ import re
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
 import cmm_dae as cd
 from cmm_dae import iftomm
@@ -27,12 +28,15 @@ def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
     ref = iftomm.a02_reference(n, res.t)
     err = np.max(np.hypot(*(iftomm.crank_tip(res) - ref).T))
     assert err <= 1e-8  # measured 4.8e-9 (N = 1), 1.2e-9 (N = 10) m
-    # the singular instants: where the reference crank angle passes 0 and -pi
-    fine = np.linspace(0.0, 1.3, 130001)
-    ang = np.unwrap(np.arctan2(*iftomm.a02_reference(n, fine).T[::-1]))
+    # the singular instants: where the crank angle phi passes 0 and -pi. On the
+    # parallelogram branch energy gives phi' = -sqrt(2 K / I), I = (n + 1) / 3 + n the
+    # rods' inertia about phi (cranks about their pivots, couplers translating) and
+    # K = I / 2 + c (1 - sin phi), c = g ((n + 1) / 2 + n): the time is a quadrature
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
     for e, target in zip(sing, (0.0, -math.pi), strict=True):
-        t_ref = fine[np.argmin(np.abs(ang - target))]
-        assert abs(e.t - t_ref) <= 2e-5  # the reference grid is 1e-5 s
+        t_ref = quad(lambda p: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(p)))),
+                     target, math.pi / 2, epsabs=1e-14, epsrel=1e-13)[0]
+        assert abs(e.t - t_ref) <= 2e-9  # measured 4.7e-10, 3.8e-10 (N = 1); 5.6e-10 s
     # energy is conserved through the crossings
     e = res.energy()
     total = e.kinetic + e.potential
