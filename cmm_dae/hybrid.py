@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -91,6 +92,14 @@ class SegmentTrace:
     #: per trigger: the trigger, its transitions, the parameter vector after each
     groups: list[tuple[Trigger, list[Transition], list[np.ndarray]]] = field(
         default_factory=list)
+    #: the singular-position crossing that followed the segment (a
+    #: :class:`~cmm_dae.singular.Crossing`), if it ended at one
+    crossing: Any = None
+    #: whether that crossing logged a "singular" event (not when it only took an earlier
+    #: crossing further out)
+    crossing_logged: bool = False
+    #: whether IDA ran the segment with the multipliers out of its error test
+    relaxed: bool = False
 
 
 def _key(locked: Locked) -> tuple:

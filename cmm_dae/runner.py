@@ -30,7 +30,7 @@ from .mechanism import Mechanism
 from .post import build_result
 from .progress import Bar
 from .result import Event, Result, Stats
-from .singular import step_over
+from .singular import Crossing, step_over
 from .structure import force_constraint_joints, labeller
 
 #: The integration methods, by name.
@@ -256,6 +256,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             t, q, v = end.t, end.q, end.v
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
+                seg.relaxed = bool(getattr(integ, "relaxed", False))
                 trace.append(seg)
             for trig in end.triggers:
                 done = ev.handle(hs, trig, q, v, t, integ.policy)
@@ -273,7 +274,11 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                                           status=Status.MAX_EVENTS)
                 integ.after_events(done)
             if end.reason == "singular":
-                t, q, v = _cross_singular(hs, integ, t, q, v, opts, rec, events, after)
+                n_events = len(events)
+                cr = _cross_singular(hs, integ, t, q, v, opts, rec, events, after)
+                t, q, v = cr.t_after, cr.q, cr.v
+                if seg is not None:
+                    seg.crossing, seg.crossing_logged = cr, len(events) > n_events
                 if t >= opts.t_end * (1.0 - 1e-12):
                     break
                 continue
@@ -318,9 +323,9 @@ def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:
 
 def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
                     v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
-                    after: list[int]) -> tuple[float, np.ndarray, np.ndarray]:
-    """Cross the singular position ahead of (t, q, v): the state after it, one sample
-    there and a "singular" event at the singular instant."""
+                    after: list[int]) -> Crossing:
+    """Cross the singular position ahead of (t, q, v): the crossing (with the state after
+    it), one sample there and a "singular" event at the singular instant."""
     cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
                    atol=opts.atol)
     cfg = hs.current()
@@ -330,7 +335,7 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
         rec.add(cr.t_after, cr.q, cr.v, cfg)
         after[-1] = len(rec) - 1
         integ.after_singular(cr.t_after)
-        return cr.t_after, cr.q, cr.v
+        return cr
     note = (f"constraints of {', '.join(cr.labels)} dependent for an instant (rank drop "
             f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
             f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
@@ -354,7 +359,7 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
     if len(events) > opts.max_events:
         raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
                           "a singular position)", status=Status.MAX_EVENTS)
-    return cr.t_after, cr.q, cr.v
+    return cr
 
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8, atol: float = 1e-10,

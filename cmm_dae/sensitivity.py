@@ -239,6 +239,12 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     trace: list = []
     res = simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                    model=model, _trace=trace, **run_options)
+    switch = next((seg.crossing for seg in trace[1:]
+                   if seg.crossing is not None and seg.crossing.switched), None)
+    if switch is not None:
+        raise CmmError(f"sensitivities through a branch switch at a singular position "
+                       f"(t = {switch.t_singular:.9g} s) are not defined: the branch taken "
+                       "there is a discrete choice")
     sp = SensitivityPass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
     q0, v0, start_events = trace[0]
     sq, sv = sp.start(q0, v0, start_events)
@@ -248,11 +254,10 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     if first is not None:
         sp.dP[0], sp.params[0] = sp.dp_of(first.p), first.p
     for seg in trace[1:]:
-        if seg.reason == "singular":
-            raise CmmError(f"sensitivities through a singular position (t = {seg.t1:.9g} s) "
-                           "are not defined: the branch taken there is a discrete choice")
         q, v, sq, sv = sp.segment(seg, sq, sv)
         q, v, sq, sv, n = sp.events(seg, q, v, sq, sv, seg.n1)
+        if seg.crossing is not None:
+            q, v, sq, sv = sp.crossing(seg, sq, sv, n)
     ev_t = np.zeros((len(res.events), sp.P))  # the events at t = 0 first: fixed time
     if sp.tau:
         ev_t[len(start_events):len(start_events) + len(sp.tau)] = sp.tau

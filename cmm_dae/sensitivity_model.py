@@ -90,6 +90,7 @@ class Equations:
         self.out = _Mat(ca.Function("sout", [q, v, a, p, th, lam], [dn(out)] + [
             dn(ca.jacobian(out, x)) for x in (q, v, a, th, lam)]))
         self._events: dict[tuple, Buffered] = {}
+        self._singular: _Mat | None = None
 
     def _outputs(self, lam) -> ca.SX:
         """The Result's joint and driver series as one vector (post-processing's
@@ -121,6 +122,22 @@ class Equations:
         eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
         force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
         return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, *tq, *eff)
+
+    def singular_function(self) -> _Mat:
+        """``g = w . (Phi_q n)`` for a left and right null vector ``w``, ``n`` of the
+        constraint Jacobian at a singular position, held fixed: it changes sign where the
+        motion passes the position (the collapsing singular value, signed), so the
+        instant's derivative follows from it as from an event function.
+        (q, t, p, theta, w, n) -> (g, g_q, g_t, g_p, g_theta)."""
+        if self._singular is None:
+            model = self.model
+            sy = model.sym
+            w, n = ca.SX.sym("w", model.m), ca.SX.sym("n", model.nq)
+            g = ca.dot(w, sy["Phi_q"] @ n)
+            self._singular = _Mat(ca.Function("ssing", [sy["q"], sy["t"], sy["p"],
+                                                        sy["theta"], w, n], [g] + [
+                ca.densify(ca.jacobian(g, sy[x])) for x in ("q", "t", "p", "theta")]))
+        return self._singular
 
     def event_function(self, seg: SegmentTrace, trig: ev.Trigger) -> Buffered:
         """The event function of ``trig`` in segment ``seg``'s configuration, as the

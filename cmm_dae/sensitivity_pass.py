@@ -14,12 +14,18 @@ from .assembly import start_spec
 from .equations import Buffered, Model
 from .errors import CmmError, SolverError, Status
 from .hybrid import SegmentTrace
-from .ida import ATOL_LAMBDA, ATOL_MU
+from .ida import ATOL_LAMBDA, ATOL_LAMBDA_SINGULAR, ATOL_MU
+from .kinematics import singular_ratio
 from .result import Result
 from .sensitivity_model import Equations
+from .singular import _A, _B, _gl2_step, hermite, null_vectors, step_over
 
 __all__ = ["ATOL_OFF", "LOOSE", "SensitivityPass"]
 
+#: Singular-value ratio at which the singular instant's derivative is taken on either side
+#: of it (round-off in the singular vectors about 1e-16 / TAU_RATIO, the two sides' mean
+#: off by the square of their distance).
+TAU_RATIO = 1e-6
 #: Absolute tolerance on the multipliers' sensitivities: out of IDA's error test.
 ATOL_OFF = 1e6
 #: Without ``error_control`` the position and velocity sensitivities are held to this many
@@ -132,21 +138,100 @@ class SensitivityPass:
     # ---- a segment
     def segment(self, seg: SegmentTrace, sq: np.ndarray, sv: np.ndarray):
         """Integrate the state and its sensitivities through one traced segment; returns
-        (q, v, s_q, s_v) at its end (before any event)."""
-        model, eq = self.model, self.eq
-        nq, m, N, P = model.nq, model.m, model.N, self.P
+        (q, v, s_q, s_v) at its end (before any event).
+
+        Where IDA with the sensitivities gives up near a singular position (a little
+        before the run's own IDA did, or at one the run's IDA stepped over), the way on is
+        the crossing's (:func:`cmm_dae.singular.step_over` from IDA's last state, replayed
+        with its tangents, the outputs inside it interpolated), and IDA starts again after
+        it for the rest of the segment."""
+        model = self.model
+        nq = model.nq
         p = seg.p
         dP = self.dp_of(p)
         t0 = seg.t0
         q = ev.project_positions(model, seg.q, t0, p)
         v = ev.project_velocities(model, q, seg.v, t0, p)
         sq, sv = self.project(q, v, t0, p, dP, sq, sv)
-        a, lam, dz, _ = self.kkt_d(q, v, t0, p, dP, sq, sv)
         times = self.res.t[seg.n0:seg.n1]
         for i in range(seg.n0, seg.n1):
             self.dP[i], self.params[i] = dP, p
-        if times.size == 0:
+        # the output times, each a clear step after the one before (a sample a hair after
+        # another, next to an event, is read from its neighbour below)
+        want: list[float] = []
+        for x in times:
+            near = ev.ZENO_DT * max(1.0, abs(x))
+            if want and x - want[-1] <= near:
+                want[-1] = x  # the later one: the segment's end stays an output
+            elif want or x - t0 > near:
+                want.append(x)
+        if not want:  # a segment of no length: the state and sensitivities as they start
+            self.sq[seg.n0:seg.n1], self.sv[seg.n0:seg.n1] = sq, sv
             return q, v, sq, sv
+        T_all: list[float] = []
+        Sq_all: list[np.ndarray] = []
+        Sv_all: list[np.ndarray] = []
+        relaxed = seg.relaxed
+        t = t0
+        while True:
+            outs = [x for x in want if x > t + ev.ZENO_DT * max(1.0, abs(t))]
+            r, T, Y, S = self._ida(t, q, v, sq, sv, p, dP, outs, relaxed)
+            # (after a failure the last row is the step IDA ended on, not an output time)
+            rows = [k for k in range(T.size) if T[k] in outs]
+            T_all += [float(T[k]) for k in rows]
+            Sq_all += [S[k, :nq] for k in rows]
+            Sv_all += [S[k, nq:2 * nq] for k in rows]
+            if r.status >= 0:
+                q, v, sq, sv = Y[-1, :nq], Y[-1, nq:2 * nq], S[-1, :nq], S[-1, nq:2 * nq]
+                break
+            t_f = float(np.asarray(r.t)[-1])
+            if not T.size or t_f <= t:
+                raise SolverError(f"the sensitivity integration failed at t = {t_f:.9g} s: "
+                                  f"IDA: {r.message}", status=Status.INTEGRATOR)
+            q, v, sq, sv = Y[-1, :nq], Y[-1, nq:2 * nq], S[-1, :nq], S[-1, nq:2 * nq]
+            try:
+                cr = step_over(model, p, t_f, q, v, outs[-1], rtol=self.rtol, atol=self.atol)
+            except SolverError:
+                raise SolverError(f"the sensitivity integration failed at t = {t_f:.9g} s: "
+                                  f"IDA: {r.message}", status=Status.INTEGRATOR) from None
+            ends = self._replay(cr, sq, sv, p, dP)
+            for x in outs:
+                if t_f < x <= cr.t_after:
+                    k = next(k for k in range(len(ends) - 1) if x <= ends[k + 1][0])
+                    a_, b_ = ends[k], ends[k + 1]
+                    zq, zv = hermite(a_[0], a_[3], a_[4], b_[0], b_[3], b_[4], x)
+                    T_all.append(x)
+                    Sq_all.append(zq)
+                    Sv_all.append(zv)
+            self.notes.append(f"segment from t = {t0:.9g} s: IDA with the sensitivities "
+                              f"stopped at t = {t_f:.9g} s near a singular position; "
+                              f"the crossing's Gauss steps took them on to "
+                              f"{cr.t_after:.9g} s")
+            t, q, v = cr.t_after, cr.q, cr.v
+            sq, sv = self.project(q, v, t, p, dP, ends[-1][3], ends[-1][4])
+            relaxed = True
+            if t >= want[-1] * (1.0 - 1e-15) or not [x for x in want if x > t]:
+                break
+        T = np.array(T_all)
+        if T.size != len(want):
+            raise SolverError(f"the sensitivity integration returned {T.size} of "
+                              f"{len(want)} output times in the segment from t = {t0:.9g} s",
+                              status=Status.INTEGRATOR)
+        Sq, Sv = np.array(Sq_all), np.array(Sv_all)
+        # each sample from the nearest output (the same time but for merged neighbours)
+        hi = np.clip(np.searchsorted(T, times), 0, T.size - 1)
+        lo = np.clip(hi - 1, 0, T.size - 1)
+        idx = np.where(np.abs(T[lo] - times) < np.abs(T[hi] - times), lo, hi)
+        self.sq[seg.n0:seg.n1] = Sq[idx]
+        self.sv[seg.n0:seg.n1] = Sv[idx]
+        return q.copy(), v.copy(), Sq[-1].copy(), Sv[-1].copy()
+
+    def _ida(self, t0, q, v, sq, sv, p, dP, outs, relaxed):
+        """IDA on the state and its sensitivities from t0 to the output times ``outs``;
+        (IDA's result, the times, states and sensitivities (n, N, P) after t0)."""
+        model, eq = self.model, self.eq
+        nq, m, N, P = model.nq, model.m, model.N, self.P
+        a, lam, dz, _ = self.kkt_d(q, v, t0, p, dP, sq, sv)
         S0 = np.zeros((N, P))
         S0[:nq], S0[nq:2 * nq], S0[2 * nq:2 * nq + m] = sq, sv, dz[nq:]
         Sp0 = np.zeros((N, P))
@@ -187,25 +272,14 @@ class SensitivityPass:
 
         scale = np.maximum(np.abs(th), 1e-300)
         scale[th == 0.0] = 1.0
-        base = np.concatenate([np.full(2 * nq, self.atol), np.full(m, ATOL_LAMBDA),
-                               np.full(m, ATOL_MU)])
+        # the multipliers as the run had them (out of the test after a singular position)
+        base = np.concatenate([np.full(2 * nq, self.atol), np.full(
+            m, ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA), np.full(m, ATOL_MU)])
         # the multipliers' sensitivities stay out of the error test (index-2 variables:
         # in it, IDA failed to converge at rtol 1e-12 on the double-folded mechanism)
         off = np.concatenate([np.zeros(2 * nq), np.full(2 * m, ATOL_OFF)])
         alg = [k for i in range(P + 1) for k in range(i * N + 2 * nq, (i + 1) * N)]
-        # the output times, each a clear step after the one before (a sample a hair after
-        # another, next to an event, is read from its neighbour below)
-        want: list[float] = []
-        for x in times:
-            near = ev.ZENO_DT * max(1.0, abs(x))
-            if want and x - want[-1] <= near:
-                want[-1] = x  # the later one: the segment's end stays an output
-            elif want or x - t0 > near:
-                want.append(x)
-        if not want:  # a segment of no length: the state and sensitivities as they start
-            self.sq[seg.n0:seg.n1], self.sv[seg.n0:seg.n1] = sq, sv
-            return q, v, sq, sv
-        tspan = np.concatenate([[t0], want])
+        tspan = np.concatenate([[t0], outs])
         extra = None
         if tspan.size == 2:  # scikit-sundae returns its own steps for two points
             extra = 0.5 * (tspan[0] + tspan[1])
@@ -224,27 +298,50 @@ class SensitivityPass:
             # sensitivities alone: the segment again with them following the state's steps
             self.notes.append(f"segment from t = {t0:.9g} s: the sensitivities were left "
                               "out of the error test (IDA failed with them in it)")
-        if r.status < 0:
-            raise SolverError(f"the sensitivity integration failed at t = {r.t[-1]:.9g} s: "
-                              f"IDA: {r.message}", status=Status.INTEGRATOR)
         Y = np.asarray(r.y)
         T = np.asarray(r.t)
         if extra is not None:
-            Y, T = Y[[0, 2]], T[[0, 2]]
+            keep = (extra != T) | (np.arange(T.size) == T.size - 1)
+            Y, T = Y[keep], T[keep]
         Y, T = Y[1:], T[1:]
-        if T.size != len(want):
-            raise SolverError(f"the sensitivity integration returned {T.size} of "
-                              f"{len(want)} output times in the segment from t = {t0:.9g} s",
-                              status=Status.INTEGRATOR)
         S = Y[:, N:].reshape(-1, P, N).transpose(0, 2, 1)  # (n, N, P)
-        # each sample from the nearest output (the same time but for merged neighbours)
-        hi = np.clip(np.searchsorted(T, times), 0, T.size - 1)
-        lo = np.clip(hi - 1, 0, T.size - 1)
-        idx = np.where(np.abs(T[lo] - times) < np.abs(T[hi] - times), lo, hi)
-        self.sq[seg.n0:seg.n1] = S[idx, :nq]
-        self.sv[seg.n0:seg.n1] = S[idx, nq:2 * nq]
-        return (Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy(), S[-1, :nq].copy(),
-                S[-1, nq:2 * nq].copy())
+        return r, T, Y, S
+
+    def _replay(self, cr, sq, sv, p, dP) -> list:
+        """The crossing's Gauss steps again from its start, with their tangents: the step
+        ends [(t, q, v, s_q, s_v)]."""
+        tt, qq, vv = cr.t0, cr.q0, cr.v0
+        guess = self.model.kkt(qq, vv, tt, p)[0]
+        ends = [(tt, qq, vv, sq, sv)]
+        for h in cr.steps:
+            qq, vv, sq, sv, guess = self._gauss_tangent(tt, qq, vv, sq, sv, h, guess, p, dP)
+            tt += h
+            ends.append((tt, qq, vv, sq, sv))
+        return ends
+
+    def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP):
+        """One Gauss step of the crossing (:func:`cmm_dae.singular._gl2_step`) and its
+        derivative: the Gauss method on the variational equations, the stage tangents made
+        consistent with the constraints as the stage states are (the derivative of the
+        projections); returns (q, v, s_q, s_v, next guess)."""
+        nq = self.model.nq
+        stages: list = []
+        qn, vn, guess = _gl2_step(self.model, p, t, q, v, h, guess, stages)
+        L = np.zeros((2, nq, self.P))
+        for _ in range(50):  # the stages' linear equations, by the state's iteration
+            dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
+            dQ = sq[None] + h * np.einsum("ij,jkl->ikl", _A, dV)
+            Ln = np.empty_like(L)
+            for i, (ti, Qi, Vi) in enumerate(stages):
+                zq, zv = self.project(Qi, Vi, ti, p, dP, dQ[i], dV[i])
+                Ln[i] = self.kkt_d(Qi, Vi, ti, p, dP, zq, zv)[2][:nq]
+            change = float(np.max(np.abs(Ln - L)))
+            L = Ln
+            if change <= 1e-13 * (1.0 + float(np.max(np.abs(L)))):
+                break
+        dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
+        return (qn, vn, sq + h * np.einsum("i,ikl->kl", _B, dV),
+                sv + h * np.einsum("i,ikl->kl", _B, L), guess)
 
     # ---- events
     def events(self, seg: SegmentTrace, q, v, sq, sv, n: int):
@@ -286,6 +383,69 @@ class SensitivityPass:
                 self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
                 n += 1
         return q, v, sq, sv, n
+
+    # ---- a singular position crossed
+    def crossing(self, seg: SegmentTrace, sq: np.ndarray, sv: np.ndarray, n: int):
+        """Carry the sensitivities through the singular-position crossing after ``seg``:
+        the derivative of the run's own Gauss steps (replayed: the same steps from the
+        same state, :meth:`_gauss_tangent`). The motion is smooth there, so nothing jumps; the
+        singular instant's derivative comes from the signed collapsing singular value
+        (:meth:`Equations.singular_function`). Returns (q, v, s_q, s_v) after it."""
+        cr = seg.crossing  # never a branch switch: refused before the pass
+        p = seg.p
+        dP = self.dp_of(p)
+        ends = self._replay(cr, sq, sv, p, dP)
+        if seg.crossing_logged:
+            self.tau.append(self._singular_tau(p, dP, ends, cr.t_singular))
+        q, v = cr.q, cr.v
+        sq, sv = self.project(q, v, cr.t_after, p, dP, ends[-1][3], ends[-1][4])
+        self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
+        return q, v, sq, sv
+
+    def _singular_tau(self, p, dP, ends: list, t_s: float) -> np.ndarray:
+        """d t_singular / d theta: the root of the signed smallest singular value
+        ``w . (Phi_q n)`` with its singular vectors held fixed, the state and its
+        sensitivities interpolated between the crossing's step ends (cubic Hermite:
+        s_q' = s_v).
+
+        At the singular instant itself the right null space is two-dimensional (the
+        motion's direction and the new one) and the singular vectors are undetermined, so
+        the derivative is the mean of the values a little before and after it, where the
+        singular-value ratio is ``TAU_RATIO``: the mean is off by the square of that
+        distance, the singular vectors by round-off over the ratio. Where the instant
+        lay before the crossing's start (the integrator had stepped across it), one Gauss
+        step back reaches it."""
+        model = self.model
+
+        def tau_at(t, q, v, sq, sv):
+            w, n = null_vectors(model, p, q, t)
+            g, g_q, g_t, g_p, g_th = self.eq.singular_function()(q, t, p, self.th, w, n)
+            rate = float((g_q @ v).item() + g_t.item())
+            return -np.ravel(g_q @ sq + g_p @ dP + g_th) / rate
+
+        if t_s < ends[0][0]:
+            # the integrator had stepped across the instant and failed just beyond it: one
+            # Gauss step back to it (its nodes lie between, off the instant)
+            t0, q0, v0, sq0, sv0 = ends[0]
+            guess = model.kkt(q0, v0, t0, p)[0]
+            back = self._gauss_tangent(t0, q0, v0, sq0, sv0, t_s - t0, guess, p, dP)
+            ends = [(t_s, *back[:4])] + list(ends)
+        k = next((k for k in range(len(ends) - 1) if ends[k][0] <= t_s <= ends[k + 1][0]),
+                 None)
+        if k is None:  # beyond the crossing's end (it ended at the run's end)
+            self.notes.append(f"the singular instant at t = {t_s:.9g} s lies beyond the "
+                              f"crossing's end: its derivative is taken there")
+            return tau_at(*ends[-1])
+        a, b = ends[k], ends[k + 1]
+        far = a if t_s - a[0] > b[0] - t_s else b
+        slope = singular_ratio(model, far[1], far[0], p) / abs(far[0] - t_s)
+        d = TAU_RATIO / slope
+        out = []
+        for t in (t_s - d, t_s + d):
+            q, v = hermite(a[0], a[1], a[2], b[0], b[1], b[2], t)
+            sq, sv = hermite(a[0], a[3], a[4], b[0], b[3], b[4], t)
+            out.append(tau_at(t, q, v, sq, sv))
+        return 0.5 * (out[0] + out[1])
 
     def _impact(self, e, tr, vm, t, p_before, dP_before, p_after, zq, zv, tau):
         """Derivative of the impact map (and of the projection onto the new lock)."""
