@@ -15,6 +15,9 @@ ended and what the event policy did there. A second pass follows that sequence:
   state after it is the derivative of the map the policy applied (the impact map with its
   restitution, the projection onto a new lock, the unchanged state of a release, a slip or
   a zone switch): ``s+ = D(s- + x'- tau) + D_theta - x'+ tau``;
+* through a singular position the crossing's Gauss steps are replayed with their
+  derivative (:meth:`SensitivityPass.crossing`), the instant's own derivative from the
+  signed collapsing singular value; a switch onto another branch is refused;
 * lock values (a stop's position, the coordinate a joint sticks at) carry their own
   derivatives into the parameter vector ``p`` of each configuration.
 
@@ -176,7 +179,8 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
                   error_control: bool = False, rtol: float = 1e-8, atol: float = 1e-10,
                   output_dt: float | None = 0.01, **run_options) -> Sensitivities:
     """Forward sensitivities of an IDA run with respect to model parameters, exact through
-    every event (lock, impact, bounce, release, stick, slip, zone switch).
+    every event (lock, impact, bounce, release, stick, slip, zone switch) and through
+    singular positions crossed on the branch of the motion.
 
     Parameters
     ----------
@@ -207,8 +211,11 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     ------
     ModelError
         A path that is not a numeric parameter of the mechanism or has no effect (named),
-        or a mechanism the sensitivities are not defined for (an equilibrium start,
-        callable load laws, redundant constraints).
+        or a mechanism the sensitivities are not defined for (callable load laws,
+        redundant constraints).
+    CmmError
+        The run switched branch at a singular position (``branch=(joint, sign)``): a
+        discrete choice, not differentiable.
     SolverError
         The run or the sensitivity integration failed.
     """

@@ -12,20 +12,16 @@ import sksundae as sun
 from . import events as ev
 from .assembly import start_spec
 from .equations import Buffered, Model
-from .errors import CmmError, SolverError, Status
+from .errors import SolverError, Status
 from .hybrid import SegmentTrace
 from .ida import ATOL_LAMBDA, ATOL_LAMBDA_SINGULAR, ATOL_MU
-from .kinematics import singular_ratio
 from .result import Result
+from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
-from .singular import _A, _B, _gl2_step, hermite, null_vectors, step_over
+from .singular import hermite, step_over
 
 __all__ = ["ATOL_OFF", "LOOSE", "SensitivityPass"]
 
-#: Singular-value ratio at which the singular instant's derivative is taken on either side
-#: of it (round-off in the singular vectors about 1e-16 / TAU_RATIO, the two sides' mean
-#: off by the square of their distance).
-TAU_RATIO = 1e-6
 #: Absolute tolerance on the multipliers' sensitivities: out of IDA's error test.
 ATOL_OFF = 1e6
 #: Without ``error_control`` the position and velocity sensitivities are held to this many
@@ -36,7 +32,7 @@ ATOL_OFF = 1e6
 LOOSE = 1e3
 
 
-class SensitivityPass:
+class SensitivityPass(CrossingPass):
     """The sensitivity pass over a traced run."""
 
     def __init__(self, model: Model, eq: Equations, res: Result, opts: dict,
@@ -307,42 +303,6 @@ class SensitivityPass:
         S = Y[:, N:].reshape(-1, P, N).transpose(0, 2, 1)  # (n, N, P)
         return r, T, Y, S
 
-    def _replay(self, cr, sq, sv, p, dP) -> list:
-        """The crossing's Gauss steps again from its start, with their tangents: the step
-        ends [(t, q, v, s_q, s_v)]."""
-        tt, qq, vv = cr.t0, cr.q0, cr.v0
-        guess = self.model.kkt(qq, vv, tt, p)[0]
-        ends = [(tt, qq, vv, sq, sv)]
-        for h in cr.steps:
-            qq, vv, sq, sv, guess = self._gauss_tangent(tt, qq, vv, sq, sv, h, guess, p, dP)
-            tt += h
-            ends.append((tt, qq, vv, sq, sv))
-        return ends
-
-    def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP):
-        """One Gauss step of the crossing (:func:`cmm_dae.singular._gl2_step`) and its
-        derivative: the Gauss method on the variational equations, the stage tangents made
-        consistent with the constraints as the stage states are (the derivative of the
-        projections); returns (q, v, s_q, s_v, next guess)."""
-        nq = self.model.nq
-        stages: list = []
-        qn, vn, guess = _gl2_step(self.model, p, t, q, v, h, guess, stages)
-        L = np.zeros((2, nq, self.P))
-        for _ in range(50):  # the stages' linear equations, by the state's iteration
-            dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
-            dQ = sq[None] + h * np.einsum("ij,jkl->ikl", _A, dV)
-            Ln = np.empty_like(L)
-            for i, (ti, Qi, Vi) in enumerate(stages):
-                zq, zv = self.project(Qi, Vi, ti, p, dP, dQ[i], dV[i])
-                Ln[i] = self.kkt_d(Qi, Vi, ti, p, dP, zq, zv)[2][:nq]
-            change = float(np.max(np.abs(Ln - L)))
-            L = Ln
-            if change <= 1e-13 * (1.0 + float(np.max(np.abs(L)))):
-                break
-        dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
-        return (qn, vn, sq + h * np.einsum("i,ikl->kl", _B, dV),
-                sv + h * np.einsum("i,ikl->kl", _B, L), guess)
-
     # ---- events
     def events(self, seg: SegmentTrace, q, v, sq, sv, n: int):
         """Apply the traced events at the segment's end; returns (s_q, s_v, next sample
@@ -368,10 +328,7 @@ class SensitivityPass:
             tau = -num.ravel() / rate
             zq, zv = sq + np.outer(v, tau), sv + np.outer(a, tau)
             for tr, pa in zip(done, p_after, strict=True):
-                e = tr.event
-                if e.kind == "singular":
-                    raise CmmError("sensitivities through a singular position are not "
-                                   "defined (the branch is a discrete choice)")
+                e = tr.event  # (a singular crossing is no trigger's transition)
                 if e.kind in ("lock", "limit", "bounce", "stick"):
                     zq, zv = self._impact(e, tr, v, t, p, dP, pa, zq, zv, tau)
                 p = pa
@@ -383,69 +340,6 @@ class SensitivityPass:
                 self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
                 n += 1
         return q, v, sq, sv, n
-
-    # ---- a singular position crossed
-    def crossing(self, seg: SegmentTrace, sq: np.ndarray, sv: np.ndarray, n: int):
-        """Carry the sensitivities through the singular-position crossing after ``seg``:
-        the derivative of the run's own Gauss steps (replayed: the same steps from the
-        same state, :meth:`_gauss_tangent`). The motion is smooth there, so nothing jumps; the
-        singular instant's derivative comes from the signed collapsing singular value
-        (:meth:`Equations.singular_function`). Returns (q, v, s_q, s_v) after it."""
-        cr = seg.crossing  # never a branch switch: refused before the pass
-        p = seg.p
-        dP = self.dp_of(p)
-        ends = self._replay(cr, sq, sv, p, dP)
-        if seg.crossing_logged:
-            self.tau.append(self._singular_tau(p, dP, ends, cr.t_singular))
-        q, v = cr.q, cr.v
-        sq, sv = self.project(q, v, cr.t_after, p, dP, ends[-1][3], ends[-1][4])
-        self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
-        return q, v, sq, sv
-
-    def _singular_tau(self, p, dP, ends: list, t_s: float) -> np.ndarray:
-        """d t_singular / d theta: the root of the signed smallest singular value
-        ``w . (Phi_q n)`` with its singular vectors held fixed, the state and its
-        sensitivities interpolated between the crossing's step ends (cubic Hermite:
-        s_q' = s_v).
-
-        At the singular instant itself the right null space is two-dimensional (the
-        motion's direction and the new one) and the singular vectors are undetermined, so
-        the derivative is the mean of the values a little before and after it, where the
-        singular-value ratio is ``TAU_RATIO``: the mean is off by the square of that
-        distance, the singular vectors by round-off over the ratio. Where the instant
-        lay before the crossing's start (the integrator had stepped across it), one Gauss
-        step back reaches it."""
-        model = self.model
-
-        def tau_at(t, q, v, sq, sv):
-            w, n = null_vectors(model, p, q, t)
-            g, g_q, g_t, g_p, g_th = self.eq.singular_function()(q, t, p, self.th, w, n)
-            rate = float((g_q @ v).item() + g_t.item())
-            return -np.ravel(g_q @ sq + g_p @ dP + g_th) / rate
-
-        if t_s < ends[0][0]:
-            # the integrator had stepped across the instant and failed just beyond it: one
-            # Gauss step back to it (its nodes lie between, off the instant)
-            t0, q0, v0, sq0, sv0 = ends[0]
-            guess = model.kkt(q0, v0, t0, p)[0]
-            back = self._gauss_tangent(t0, q0, v0, sq0, sv0, t_s - t0, guess, p, dP)
-            ends = [(t_s, *back[:4])] + list(ends)
-        k = next((k for k in range(len(ends) - 1) if ends[k][0] <= t_s <= ends[k + 1][0]),
-                 None)
-        if k is None:  # beyond the crossing's end (it ended at the run's end)
-            self.notes.append(f"the singular instant at t = {t_s:.9g} s lies beyond the "
-                              f"crossing's end: its derivative is taken there")
-            return tau_at(*ends[-1])
-        a, b = ends[k], ends[k + 1]
-        far = a if t_s - a[0] > b[0] - t_s else b
-        slope = singular_ratio(model, far[1], far[0], p) / abs(far[0] - t_s)
-        d = TAU_RATIO / slope
-        out = []
-        for t in (t_s - d, t_s + d):
-            q, v = hermite(a[0], a[1], a[2], b[0], b[1], b[2], t)
-            sq, sv = hermite(a[0], a[3], a[4], b[0], b[3], b[4], t)
-            out.append(tau_at(t, q, v, sq, sv))
-        return 0.5 * (out[0] + out[1])
 
     def _impact(self, e, tr, vm, t, p_before, dP_before, p_after, zq, zv, tau):
         """Derivative of the impact map (and of the projection onto the new lock)."""
