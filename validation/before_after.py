@@ -11,7 +11,13 @@ the same driving effort (1e-9 N m) and prints the ratio of the medians::
     python validation/before_after.py --before 695645f --compiled   # the speed work
 
 With ``--compiled`` the working tree is also timed with ``compiled=True`` (the C segment,
-built once into a temporary cache before the timed runs), as a third column.
+built once into a temporary cache before the timed runs), as a third column. ``--floor``
+(with ``--compiled``) adds the floor of any path through scikit-sundae's Python callbacks
+that takes the same steps: the compiled time plus, per callback the default path makes
+(residual, Jacobian and root-function calls, counted), scikit-sundae's own cost of calling
+a Python function whose body does nothing (measured on a linear test DAE with and without
+such a root function). It is a lower bound: the residual's and the Jacobian's wrappers
+convert more arrays than the root function's.
 """
 
 from __future__ import annotations
@@ -57,6 +63,65 @@ print(json.dumps({"wall": best, "events": [[e.kind, e.joint, e.t] for e in res.e
                   "effort": res.driver(drv).effort.tolist() if drv else [],
                   "steps": res.stats.steps}))
 """
+
+
+FLOOR_JOB = r"""
+import json, sys, time
+import numpy as np
+import sksundae as sun
+import cmm_dae as cd
+from cmm_dae import ida
+mech = cd.load(sys.argv[1])
+t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+counts = {"residual": 0, "jacobian": 0, "events": 0}
+res0, jac0, ev0 = (ida.IdaIntegrator._residual, ida.IdaIntegrator._jacobian,
+                   ida.IdaIntegrator._events)
+def residual(self, t, y, yp, res):  # scikit-sundae reads the signatures: no *args
+    counts["residual"] += 1
+    return res0(self, t, y, yp, res)
+def jacobian(self, t, y, yp, res, cj, JJ):
+    counts["jacobian"] += 1
+    return jac0(self, t, y, yp, res, cj, JJ)
+def events(self, t, y, yp, out):
+    counts["events"] += 1
+    return ev0(self, t, y, yp, out)
+ida.IdaIntegrator._residual, ida.IdaIntegrator._jacobian = residual, jacobian
+ida.IdaIntegrator._events = events
+cd.run_dae(mech, t_end, rtol=rtol, atol=rtol * 1e-2)
+N = 40
+lam = np.linspace(0.5, 2.0, N)
+def res(t, y, yp, r):
+    np.multiply(lam, y, out=r)
+    r += yp
+def jac(t, y, yp, r, cj, JJ):
+    JJ[:] = np.diag(lam + cj)
+def empty(t, y, yp, out):
+    pass
+calls = [0]
+def counting(t, y, yp, out):
+    calls[0] += 1
+tspan = np.linspace(0.0, 40.0, 1001)
+def solve(fn):
+    kw = {"eventsfn": fn, "num_events": 1} if fn else {}
+    s = sun.ida.IDA(res, jacfn=jac, rtol=1e-10, atol=1e-12, **kw)
+    t0 = time.perf_counter()
+    s.solve(tspan, np.ones(N), -lam)
+    return time.perf_counter() - t0
+solve(counting)
+none = with_fn = float("inf")
+for _ in range(max(repeat, 5)):
+    none, with_fn = min(none, solve(None)), min(with_fn, solve(empty))
+print(json.dumps({"counts": counts, "per_call": (with_fn - none) / calls[0]}))
+"""
+
+
+def floor_job(model: Path, t_end: float, rtol: float, repeat: int) -> dict:
+    """Callback counts of the working tree's default path and scikit-sundae's cost per
+    Python callback (s), in a fresh subprocess."""
+    out = subprocess.run([sys.executable, "-c", FLOOR_JOB, str(model), str(t_end), str(rtol),
+                          str(repeat)], capture_output=True, text=True, check=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}, cwd=ROOT)
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def unpack(rev: str, where: Path) -> Path:
@@ -108,7 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=5, help="warm runs per subprocess")
     ap.add_argument("--compiled", action="store_true",
                     help="also time the working tree with compiled=True")
+    ap.add_argument("--floor", action="store_true",
+                    help="with --compiled: the floor of a path through scikit-sundae's "
+                    "Python callbacks (compiled time + callbacks x their own cost)")
     a = ap.parse_args(argv)
+    if a.floor and not a.compiled:
+        ap.error("--floor needs --compiled (the floor is built on the compiled time)")
     model = Path(a.model).resolve()
     names = ["before", "after"] + (["compiled"] if a.compiled else [])
     with tempfile.TemporaryDirectory() as tmp:
@@ -118,12 +188,15 @@ def main(argv: list[str] | None = None) -> int:
             job(ROOT, model, 0.1, a.rtol, 0, True, cache)
         walls: dict[str, list[float]] = {name: [] for name in names}
         last: dict[str, dict] = {}
+        floors: list[dict] = []
         for _ in range(a.rounds):
             for name in names:
                 path = old if name == "before" else ROOT
                 r = job(path, model, a.t_end, a.rtol, a.repeat, name == "compiled", cache)
                 walls[name].append(r["wall"])
                 last[name] = r
+            if a.floor:
+                floors.append(floor_job(model, a.t_end, a.rtol, a.repeat))
     med = {name: statistics.median(w) for name, w in walls.items()}
     print(f"model {model.name}, t_end {a.t_end} s, rtol {a.rtol:g}; {a.rounds} alternating "
           f"rounds, best of {a.repeat} warm runs each")
@@ -140,6 +213,18 @@ def main(argv: list[str] | None = None) -> int:
               f"{same}; largest event-time difference {dt_ev:.2e} s; largest "
               f"driving-effort difference {d_eff:.2e}")
         ok = ok and same and dt_ev <= 1e-9 and d_eff <= 1e-9
+    if floors:
+        counts = floors[-1]["counts"]
+        per = statistics.median(f["per_call"] for f in floors)
+        n = sum(counts.values())
+        floor = med["compiled"] + n * per
+        each = ", ".join(f"{f['per_call'] * 1e6:.2f}" for f in floors)
+        print(f"scikit-sundae's own cost per Python callback (empty body): {per * 1e6:.2f} us "
+              f"[{each}]; the default path "
+              f"makes {n} callbacks ({', '.join(f'{k} {v}' for k, v in counts.items())})")
+        print(f"floor through Python callbacks (compiled + callbacks x that cost): "
+              f"{floor * 1e3:.2f} ms; ratio before / floor: {med['before'] / floor:.3f}; "
+              f"after / floor: {med['after'] / floor:.3f}")
     return 0 if ok else 1
 
 
