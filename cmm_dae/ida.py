@@ -223,6 +223,11 @@ class IdaIntegrator(Integrator):
             self.first_step = min(1e-6, 1e3 * np.finfo(float).eps * (1 + abs(c))
                                   / max(abs(last.velocity_after), 1e-300))
 
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        if self.opts.output_dt is None:  # IDA's own steps: none inside a crossing
+            return np.zeros(0)
+        return self._grid_inside(self.opts.output_dt, t0, min(t1, self.opts.t_end))
+
     def after_singular(self, t: float) -> None:
         # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
         # restart (order 1, small steps) fails on their error test alone.

@@ -9,6 +9,7 @@ the event policy, failure wrapping, the Result — is the driver's, once for all
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Literal
@@ -16,7 +17,7 @@ from typing import Literal
 import numpy as np
 
 from .equations import Model
-from .hybrid import HybridState, Policy, Transition, Trigger
+from .hybrid import ZENO_DT, HybridState, Policy, Transition, Trigger
 from .progress import Bar
 from .result import Stats
 
@@ -130,6 +131,20 @@ class Integrator(ABC):
     def time_resolution(opts: RunOptions) -> float:
         """Shortest time between two events this method resolves, s (the event policy's
         Zeno rule ends bounces that reach it)."""
+
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        """The output grid's times strictly inside (t0, t1), s: the samples a crossing of
+        a singular position records between its ends (none by default)."""
+        return np.zeros(0)
+
+    @staticmethod
+    def _grid_inside(step: float, t0: float, t1: float) -> np.ndarray:
+        """Multiples of ``step`` strictly inside (t0, t1), clear of both ends by the event
+        resolution (s)."""
+        k = np.arange(math.ceil(t0 / step), math.floor(t1 / step) + 1)
+        times = k * step
+        clear = ZENO_DT * max(1.0, abs(t1))
+        return times[(times > t0 + clear) & (times < t1 - clear)]
 
     @abstractmethod
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:

@@ -193,6 +193,10 @@ class IterativeIntegrator(Integrator):
         self._steps: dict[tuple, _CompiledStep] = {}
         self.triggers: list[ev.Trigger] | None = None  # this configuration's (None: ask)
 
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        return self._grid_inside(self.opts.dt * self.opts.output_every, t0,
+                                 min(t1, self.opts.t_end))
+
     def after_singular(self, t: float) -> None:
         # go on from the grid point before t: the next step ends on the grid again
         self.n = max(self.n, int(np.floor(t / self.opts.dt + 1e-9)))

@@ -329,9 +329,15 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
     cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
                    atol=opts.atol)
     cfg = hs.current()
+    # the output grid inside the crossing's window, from its own steps (a window can be
+    # 0.3 s long where the integrator gave up early, at tight tolerances)
+    inside = [(x, *cr.state_at(hs.model, hs.p, x))
+              for x in integ.output_times(cr.t0, cr.t_after)]
     if events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
         # the integrator could not restart where the last crossing ended: the same
         # crossing, taken further out (one event, its sample moved)
+        for x, qx, vx in inside:
+            rec.add(x, qx, vx, cfg)
         rec.add(cr.t_after, cr.q, cr.v, cfg)
         after[-1] = len(rec) - 1
         integ.after_singular(cr.t_after)
@@ -353,6 +359,8 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
                         # the kinetic energy changes across its window by the work of the
                         # forces, which the energy audit books from the samples
                         0.0, 0.0, "", note))
+    for x, qx, vx in inside:
+        rec.add(x, qx, vx, cfg)
     rec.add(cr.t_after, cr.q, cr.v, cfg)
     after.append(len(rec) - 1)
     integ.after_singular(cr.t_after)

@@ -35,6 +35,20 @@ class CrossingPass:
         ends = self._replay(cr, sq, sv, p, dP)
         if seg.crossing_logged:
             self.tau.append(self._singular_tau(p, dP, ends, cr.t_singular))
+        # the output grid inside the window (the run recorded it from the crossing's steps)
+        t = self.res.t
+        while n < t.size - 1 and t[n] < cr.t_after:
+            # the run's own Gauss step to the sample, with its derivative
+            t0, q0, v0, sq0, sv0 = ends[cr.start_for(t[n])]
+            if t[n] != t0:
+                guess = self.model.kkt(q0, v0, t0, p)[0]
+                q0, v0, sq0, sv0, _ = self._gauss_tangent(t0, q0, v0, sq0, sv0, t[n] - t0,
+                                                          guess, p, dP)
+            # projected as the sample is
+            self.sq[n], self.sv[n] = self.project(self.res.data["q"][n],
+                                                  self.res.data["v"][n], t[n], p, dP, sq0, sv0)
+            self.dP[n], self.params[n] = dP, p
+            n += 1
         q, v = cr.q, cr.v
         sq, sv = self.project(q, v, cr.t_after, p, dP, ends[-1][3], ends[-1][4])
         self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
