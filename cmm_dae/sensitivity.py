@@ -169,8 +169,6 @@ def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
 def _unsupported(mech: Mechanism, model: Model) -> str | None:
     if model.callables:
         return "load laws given as Python callables (CasADi cannot differentiate them)"
-    if model.m and redundant_base_rows(model):
-        return "a redundant constraint set (its reactions are a minimum-norm choice)"
     return None
 
 
@@ -211,8 +209,9 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     ------
     ModelError
         A path that is not a numeric parameter of the mechanism or has no effect (named),
-        or a mechanism the sensitivities are not defined for (callable load laws,
-        redundant constraints).
+        or a mechanism the sensitivities are not defined for (callable load laws).
+        With redundant constraints the joint forces and torques are minimum-norm
+        reactions: their derivatives are NaN (said in ``notes``).
     CmmError
         The run switched branch at a singular position (``branch=(joint, sign)``): a
         discrete choice, not differentiable.
@@ -233,6 +232,9 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
                                       "equilibrium, not a free parameter") for x in clash],
                              mech.source)
     model = Model(mech, theta=paths + solved)
+    drop = redundant_base_rows(model) if model.m else ()
+    if drop:  # as the run leaves them out (the pass must follow the same equations)
+        model = Model(mech, theta=paths + solved, drop=drop)
     why = _unsupported(mech, model)
     if why is not None:
         raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),
@@ -269,6 +271,14 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     if sp.tau:
         ev_t[len(start_events):len(start_events) + len(sp.tau)] = sp.tau
     data = sp.outputs()
+    if model.dropped:
+        # the motion is exact with the redundant rows left out, but the Result reports
+        # the reactions shared out at minimum norm over every row, a choice the pass does
+        # not differentiate: their derivatives are not given
+        data["jforce"][:], data["jtorque"][:] = np.nan, np.nan
+        sp.notes.append("redundant constraints (" + ", ".join(res.meta["redundant"]) +
+                        "): the joint forces and torques are minimum-norm reactions; "
+                        "their derivatives are not given (NaN)")
     if solved:
         ev_t, data = _through_equilibrium(model, ev_t, data, len(paths))
     return Sensitivities(res, paths, model.theta0[:len(paths)].copy(), ev_t, data,
