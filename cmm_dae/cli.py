@@ -270,7 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="simulate a model with IDA and print a summary")
     common(r)
     r.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance (1e-8)")
-    r.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance (1e-10)")
+    r.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (default: 1e-2 of rtol)")
     r.add_argument("--output-dt", type=float, default=0.01, help="output spacing, s (0.01)")
     r.add_argument("--csv", help="write every series to this CSV file")
     r.add_argument("--save", help="save the Result to this .npz file")

@@ -174,7 +174,7 @@ def _unsupported(mech: Mechanism, model: Model) -> str | None:
 
 
 def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *,
-                  error_control: bool = False, rtol: float = 1e-8, atol: float = 1e-10,
+                  error_control: bool = False, rtol: float = 1e-8, atol: float | None = None,
                   output_dt: float | None = 0.01, **run_options) -> Sensitivities:
     """Forward sensitivities of an IDA run with respect to model parameters, exact through
     every event (lock, impact, bounce, release, stick, slip, zone switch) and through
@@ -222,6 +222,8 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
 
     wall0 = time.perf_counter()
     paths = check_params(mech, params)
+    if atol is None and isinstance(rtol, float | int):
+        atol = 1e-2 * rtol  # as for a run
     solved: tuple[str, ...] = ()
     if mech.initial.equilibrium:  # the solved values move with the parameters: carried
         mech, eq_values = solve_equilibrium(mech)  # as parameters, eliminated at the end

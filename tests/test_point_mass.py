@@ -44,6 +44,21 @@ def test_a01_point_mass_against_the_exact_solution():
                                                     np.sin(exact_angle(res.t))]))) <= 1e-7
 
 
+def test_default_atol_follows_rtol_on_a01():
+    """atol defaults to 1e-2 of rtol: a fixed 1e-10 capped the accuracy where a coordinate
+    passes zero (over 50 s at rtol 1e-11: 1.47e-6 m with atol 1e-10; measured 2.14e-7 m
+    with the default, 1e-13). Reference: the exact elliptic solution."""
+    res = cd.run_dae(a01_pendulum(), 50.0, rtol=1e-11, output_dt=0.1)
+    assert res.meta["tolerances"]["atol"] == pytest.approx(1e-13, rel=1e-12)
+    tip = L * np.column_stack([np.cos(res.joint("O").position),
+                               np.sin(res.joint("O").position)])
+    ref = L * np.column_stack([np.cos(exact_angle(res.t)), np.sin(exact_angle(res.t))])
+    assert np.max(np.hypot(*(tip - ref).T)) <= 5e-7
+    # an explicit atol is kept; the default rtol gives the former 1e-10
+    assert cd.run_dae(a01_pendulum(), 0.1, atol=1e-9).meta["tolerances"]["atol"] == 1e-9
+    assert cd.run_dae(a01_pendulum(), 0.1).meta["tolerances"]["atol"] == pytest.approx(1e-10)
+
+
 def test_a01_with_the_iterative_algorithm():
     res = cd.run_iterative(a01_pendulum(), 1.0, dt=1e-4, output_every=100)
     assert np.max(np.abs(res.joint("O").position - exact_angle(res.t))) <= 5e-3
