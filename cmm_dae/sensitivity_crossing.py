@@ -8,7 +8,8 @@ import numpy as np
 
 from .hybrid import SegmentTrace
 from .kinematics import singular_ratio
-from .singular import _A, _B, _gl2_step, hermite, null_vectors
+from .singular import _A, _B, _gl2_step
+from .singular_instant import hermite, null_vectors
 
 __all__ = ["CrossingPass", "TAU_RATIO"]
 

@@ -18,7 +18,8 @@ from .ida import ATOL_LAMBDA, ATOL_LAMBDA_SINGULAR, ATOL_MU
 from .result import Result
 from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
-from .singular import hermite, step_over
+from .singular import step_over
+from .singular_instant import hermite
 
 __all__ = ["ATOL_OFF", "LOOSE", "SensitivityPass"]
 
