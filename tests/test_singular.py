@@ -205,5 +205,15 @@ def test_a02_runs_its_20_seconds_at_the_default_tolerances():
     or just past others; all are crossed."""
     res = cd.run_dae(cd.load(cd.example("iftomm_a02_four_bar_N1")), 20.0)
     assert res.success and len([e for e in res.events if e.kind == "singular"]) >= 5
+    # each crossing keeps the energy: over 0.12 s around it the total moves by at most
+    # 4.7e-6 J (of 30.8 J); the IDA segments between crossings drift 2.4e-5..5.9e-5 J
+    e = res.energy()
+    total = e.kinetic + e.potential
+    for ev in res.events:
+        i0, i1 = np.searchsorted(res.t, [ev.t - 0.06, ev.t + 0.06])
+        assert abs(total[min(i1, total.size - 1)] - total[i0]) <= 1e-5
+    # the tip: 7.1e-4 m measured, and 8.3e-5..7.4e-4 m when the crossings' step control
+    # was varied (the segments' own drift, which moves with where IDA hands over, turns
+    # into phase over 20 s); 2.1e-6 m at rtol 1e-10
     err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(1, res.t)).T))
-    assert err <= 3e-4  # measured 1.4e-4 m (2.1e-6 m at rtol 1e-10)
+    assert err <= 1e-3
