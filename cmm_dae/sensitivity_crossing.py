@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .hybrid import SegmentTrace
-from .kinematics import singular_ratio
+from .kinematics import project_positions, project_velocities, singular_ratio
 from .singular import _A, _B, _gl2_step
 from .singular_instant import hermite, null_vectors
 
@@ -39,15 +39,7 @@ class CrossingPass:
         # the output grid inside the window (the run recorded it from the crossing's steps)
         t = self.res.t
         while n < t.size - 1 and t[n] < cr.t_after:
-            # the run's own Gauss step to the sample, with its derivative
-            t0, q0, v0, sq0, sv0 = ends[cr.start_for(t[n])]
-            if t[n] != t0:
-                guess = self.model.kkt(q0, v0, t0, p)[0]
-                q0, v0, sq0, sv0, _ = self._gauss_tangent(t0, q0, v0, sq0, sv0, t[n] - t0,
-                                                          guess, p, dP)
-            # projected as the sample is
-            self.sq[n], self.sv[n] = self.project(self.res.data["q"][n],
-                                                  self.res.data["v"][n], t[n], p, dP, sq0, sv0)
+            self.sq[n], self.sv[n] = self.inside(cr, ends, float(t[n]), p, dP)
             self.dP[n], self.params[n] = dP, p
             n += 1
         q, v = cr.q, cr.v
@@ -99,6 +91,19 @@ class CrossingPass:
             sq, sv = hermite(a[0], a[3], a[4], b[0], b[3], b[4], t)
             out.append(tau_at(t, q, v, sq, sv))
         return 0.5 * (out[0] + out[1])
+
+    def inside(self, cr, ends: list, t: float, p, dP) -> tuple[np.ndarray, np.ndarray]:
+        """(s_q, s_v) at a time t inside the crossing ``cr`` (replayed to ``ends``): the
+        derivative of the Gauss step :meth:`~cmm_dae.singular.Crossing.state_at` takes to
+        it, projected as that state is."""
+        t0, q0, v0, sq0, sv0 = ends[cr.start_for(t)]
+        if t != t0:
+            guess = self.model.kkt(q0, v0, t0, p)[0]
+            q0, v0, sq0, sv0, _ = self._gauss_tangent(t0, q0, v0, sq0, sv0, t - t0, guess,
+                                                      p, dP)
+        q1 = project_positions(self.model, q0, t, p)
+        return self.project(q1, project_velocities(self.model, q1, v0, t, p), t, p, dP,
+                            sq0, sv0)
 
     def _replay(self, cr, sq, sv, p, dP) -> list:
         """The crossing's Gauss steps again from its start, with their tangents: the step

@@ -19,7 +19,6 @@ from .result import Result
 from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
 from .singular import step_over
-from .singular_instant import hermite
 
 __all__ = ["ATOL_OFF", "LOOSE", "SensitivityPass"]
 
@@ -140,8 +139,8 @@ class SensitivityPass(CrossingPass):
         Where IDA with the sensitivities gives up near a singular position (a little
         before the run's own IDA did, or at one the run's IDA stepped over), the way on is
         the crossing's (:func:`cmm_dae.singular.step_over` from IDA's last state, replayed
-        with its tangents, the outputs inside it interpolated), and IDA starts again after
-        it for the rest of the segment."""
+        with its tangents, the outputs inside it as a crossing records them), and IDA
+        starts again after it for the rest of the segment."""
         model = self.model
         nq = model.nq
         p = seg.p
@@ -194,9 +193,7 @@ class SensitivityPass(CrossingPass):
             ends = self._replay(cr, sq, sv, p, dP)
             for x in outs:
                 if t_f < x <= cr.t_after:
-                    k = next(k for k in range(len(ends) - 1) if x <= ends[k + 1][0])
-                    a_, b_ = ends[k], ends[k + 1]
-                    zq, zv = hermite(a_[0], a_[3], a_[4], b_[0], b_[3], b_[4], x)
+                    zq, zv = self.inside(cr, ends, x, p, dP)
                     T_all.append(x)
                     Sq_all.append(zq)
                     Sv_all.append(zv)
