@@ -108,7 +108,7 @@ class CrossingPass:
     def _replay(self, cr, sq, sv, p, dP) -> list:
         """The crossing's Gauss steps again from its start, with their tangents: the step
         ends [(t, q, v, s_q, s_v)]."""
-        tt, qq, vv = cr.t0, cr.q0, cr.v0
+        tt, qq, vv = cr.ends[0]
         guess = self.model.kkt(qq, vv, tt, p)[0]
         ends = [(tt, qq, vv, sq, sv)]
         for h in cr.steps:

@@ -86,13 +86,15 @@ class Crossing:
     #: the singular instant (0 when it lay behind): what the sensitivities replay.
     steps: tuple[float, ...] = ()
     n_before: int = 0
-    #: The state handed over: time (s), positions, velocities.
-    t0: float = math.nan
-    q0: np.ndarray | None = None
-    v0: np.ndarray | None = None
-    #: The step ends [(t, q, v)] from that state on (a branch switch repeats its instant
-    #: with the new velocities): :meth:`state_at` steps from them.
+    #: The step ends [(t, q, v)] from the state handed over (the first) on (a branch
+    #: switch repeats its instant with the new velocities): :meth:`state_at` steps from
+    #: them.
     ends: tuple = ()
+
+    @property
+    def t0(self) -> float:
+        """Time of the state handed over, s."""
+        return self.ends[0][0]
 
     def start_for(self, t: float) -> int:
         """The step end a sample at t inside the crossing is stepped from: the nearer end
@@ -430,4 +432,4 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         except np.linalg.LinAlgError:
             pass  # the extrapolated instant stands
     return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump, switched,
-                    tuple(taken), nsub, t, q.copy(), v.copy(), tuple(ends))
+                    tuple(taken), nsub, tuple(ends))
