@@ -7,6 +7,7 @@ of its own frame, the frame its ``points`` and ``centroid`` are written in.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from dataclasses import InitVar, dataclass, field
 from types import MappingProxyType
@@ -18,7 +19,7 @@ from .errors import ModelError, Problem
 __all__ = [
     "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Damper", "Driver",
     "Element", "Friction", "Initial", "Joint", "Law", "Limits", "Load", "Mechanism", "Spring",
-    "Zone", "validate",
+    "Zone", "require_mechanism", "validate",
 ]
 
 
@@ -403,6 +404,16 @@ class Mechanism:
         if body == GROUND:
             return self.ground[pt]
         return self.bodies[body].points[pt]
+
+
+def require_mechanism(obj: object, caller: str) -> None:
+    """Raise a plain TypeError when ``obj`` is not a :class:`Mechanism` (a model file's
+    path is the usual slip: it said "'PosixPath' object has no attribute 'bodies'")."""
+    if not isinstance(obj, Mechanism):
+        hint = (" (a model file: cmm_dae.load(path) reads it into one)"
+                if isinstance(obj, str | os.PathLike) else "")
+        raise TypeError(f"{caller} expects a cmm_dae.Mechanism{hint}, got "
+                        f"{type(obj).__name__} {obj!r:.80}")
 
 
 def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source, loads=None,

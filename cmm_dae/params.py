@@ -11,7 +11,16 @@ from dataclasses import replace
 import numpy as np
 
 from .errors import ModelError, Problem
-from .mechanism import GROUND, Damper, Initial, Limits, Mechanism, Spring, _frozen
+from .mechanism import (
+    GROUND,
+    Damper,
+    Initial,
+    Limits,
+    Mechanism,
+    Spring,
+    _frozen,
+    require_mechanism,
+)
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 #: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
@@ -141,6 +150,7 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
         number, or a path whose value the mechanism never reads (e.g. the amplitude of a
         constant-speed driver), each named.
     """
+    require_mechanism(mech, "with_params")
     problems = []
     for path, value in values.items():
         if isinstance(value, bool) or not isinstance(value, int | float | np.number):

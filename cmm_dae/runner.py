@@ -26,7 +26,7 @@ from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, S
 from .ida import IdaIntegrator
 from .integrator import Integrator, Recorder, RunOptions
 from .iterative import IterativeIntegrator
-from .mechanism import Mechanism
+from .mechanism import Mechanism, require_mechanism
 from .post import build_result
 from .progress import Bar
 from .result import Event, Result, Stats
@@ -195,6 +195,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     SolverError
         The run failed part-way; ``.result`` holds everything computed up to then.
     """
+    require_mechanism(mech, "simulate")
     opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
                          output_every=output_every, max_events=max_events, v_lock=v_lock,
                          max_steps=max_steps)
@@ -388,6 +389,7 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8,
             branch: str | tuple[str, int] = "continue", compiled: bool = False,
             linsolver: str = "auto") -> Result:
     """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
+    require_mechanism(mech, "run_dae")
     return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                     max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
                     model=model, progress=progress, branch=branch, compiled=compiled,
@@ -401,6 +403,7 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
                   branch: str | tuple[str, int] = "continue") -> Result:
     """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
     ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
+    require_mechanism(mech, "run_iterative")
     return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
                     v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
                     model=model, progress=progress, branch=branch)

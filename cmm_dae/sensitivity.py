@@ -40,7 +40,7 @@ from .assembly import redundant_base_rows
 from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import CmmError, ModelError, Problem
-from .mechanism import Mechanism
+from .mechanism import Mechanism, require_mechanism
 from .params import path_problem
 from .result import Result
 from .sensitivity_model import Equations
@@ -221,6 +221,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     from .runner import simulate
 
     wall0 = time.perf_counter()
+    require_mechanism(mech, "sensitivities")
     paths = check_params(mech, params)
     if atol is None and isinstance(rtol, float | int):
         atol = 1e-2 * rtol  # as for a run

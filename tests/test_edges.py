@@ -92,6 +92,22 @@ def test_step_count_that_would_not_end(four_bar):
         cd.run_iterative(four_bar, 10.0, dt=1e-9)
 
 
+
+def test_a_model_path_instead_of_a_mechanism_is_named():
+    """A path handed to a run used to end in "'PosixPath' object has no attribute
+    'bodies'"; now a TypeError says what to do."""
+    path = cd.example("four_bar")
+    for call, name in ((lambda: cd.run_dae(path, 1.0), "run_dae"),
+                       (lambda: cd.run_iterative(str(path), 1.0), "run_iterative"),
+                       (lambda: cd.simulate(path, 1.0), "simulate"),
+                       (lambda: cd.sensitivities(path, ["gravity.y"], 1.0), "sensitivities"),
+                       (lambda: cd.with_params(path, {"gravity.y": -9.0}), "with_params")):
+        with pytest.raises(TypeError, match=rf"^{name} expects a cmm_dae\.Mechanism \(a model "
+                           r"file: cmm_dae\.load\(path\) reads it into one\), got "):
+            call()
+    with pytest.raises(TypeError, match=r"^run_dae expects a cmm_dae\.Mechanism, got int 3$"):
+        cd.run_dae(3)
+
 def test_all_bad_options_at_once(four_bar):
     with pytest.raises(cd.ModelError) as info:
         cd.simulate(four_bar, 1.0, method="rk4", v_lock=-1.0, max_steps=2.5, output_every=0)
