@@ -210,6 +210,10 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     -------
     Comparison
     """
+    for name, r in (("a", a), ("b", b)):
+        if not isinstance(r, Result):
+            raise TypeError(f"compare expects two cmm_dae.Result objects (run_dae, "
+                            f"run_iterative or Result.load), got {type(r).__name__} for {name}")
     if a.meta["joints"] != b.meta["joints"] or a.meta["bodies"] != b.meta["bodies"]:
         raise CmmError("the two results are of different mechanisms")
     t_end = min(a.t[-1], b.t[-1])

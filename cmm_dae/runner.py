@@ -75,12 +75,18 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
                            f"got {method!r}"))
     ok_t = need(_is_num(t_end) and math.isfinite(t_end) and t_end > 0, "t_end",
                 "expected a positive end time in s", t_end)
-    need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol", "expected 1e-15 <= rtol <= 1e-2",
-         rtol)
-    if atol is None and _is_num(rtol):
+    if ok_t and method == "ida" and t_end < ev.ZENO_DT:
+        # IDA's first steps would be ~1e-24 s, where the index-2 Newton matrix (mass / h
+        # beside the constraint rows) cannot be solved: it failed at t = 0 on a four-bar
+        # below 1e-13 s. Shorter than the events' resolution, such a run says nothing.
+        ok_t = need(False, "t_end", f"expected at least {ev.ZENO_DT:g} s with IDA (the "
+                    "run's time resolution; method='iterative' takes any end time)", t_end)
+    ok_rtol = need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol",
+                   "expected 1e-15 <= rtol <= 1e-2", rtol)
+    if atol is None and ok_rtol:
         atol = 1e-2 * rtol  # tighter with rtol (a fixed atol caps it where y passes 0)
-    need(_is_num(atol) and 0 < atol <= 1e-2, "atol", "expected 0 < atol <= 1e-2 or None",
-         atol)
+    need((atol is None and not ok_rtol) or (_is_num(atol) and 0 < atol <= 1e-2), "atol",
+         "expected 0 < atol <= 1e-2 or None", atol)
     ok_out = need(output_dt is None or (_is_num(output_dt) and math.isfinite(output_dt)
                                         and output_dt > 0),
                   "output_dt", "expected a positive step in s or None", output_dt)
@@ -136,7 +142,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     mech : Mechanism
         The mechanism (:func:`cmm_dae.load` reads one from TOML).
     t_end : float
-        End time, s.
+        End time, s (with IDA at least 1e-9 s, the run's time resolution).
     method : {"ida", "iterative"}
         SUNDIALS IDA on the index-2 DAE, or the paper's fixed-step iterative algorithm.
     rtol : float
@@ -188,6 +194,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
 
     Raises
     ------
+    TypeError
+        ``mech`` is not a Mechanism (a model file's path: read it with
+        :func:`cmm_dae.load`).
     ModelError
         A bad option (all of them named at once) or a bad initial state.
     AssemblyError

@@ -107,12 +107,32 @@ def test_a_model_path_instead_of_a_mechanism_is_named():
             call()
     with pytest.raises(TypeError, match=r"^run_dae expects a cmm_dae\.Mechanism, got int 3$"):
         cd.run_dae(3)
+    with pytest.raises(TypeError, match=r"^compare expects two cmm_dae\.Result objects .*got "
+                       r"Mechanism for b$"):
+        cd.compare(cd.run_dae(cd.load(path), 0.1), cd.load(path))
 
 def test_all_bad_options_at_once(four_bar):
     with pytest.raises(cd.ModelError) as info:
         cd.simulate(four_bar, 1.0, method="rk4", v_lock=-1.0, max_steps=2.5, output_every=0)
     assert {p.key for p in info.value.problems} == {"method", "v_lock", "max_steps",
                                                     "output_every"}
+
+
+def test_tiny_end_times_and_a_bad_rtol(four_bar):
+    """IDA failed at t = 0 ("corrector convergence failed", h = 1.9e-24 s) for t_end below
+    about 1e-13 s; such an end time is now refused by name, while the fixed-step
+    algorithm, which takes any step, still runs it. A bad rtol no longer drags in an
+    atol the user never gave."""
+    ok = cd.run_dae(four_bar, 1e-9)
+    assert ok.status == "success" and ok.t[-1] == 1e-9
+    for t_end in (1e-15, 1e-200):
+        with pytest.raises(cd.ModelError, match=r"\[run\] t_end: expected at least 1e-09 s "
+                           r"with IDA .*got 1e-"):
+            cd.run_dae(four_bar, t_end)
+    assert cd.run_iterative(four_bar, 1e-15, dt=1e-15).t[-1] == 1e-15
+    with pytest.raises(cd.ModelError) as info:
+        cd.run_dae(four_bar, 1.0, rtol=float("nan"))
+    assert [p.key for p in info.value.problems] == ["rtol"]
 
 
 # ------------------------------------------------------------------ saved results
