@@ -25,7 +25,8 @@ if TYPE_CHECKING:  # pragma: no cover
 #: its unit in the same comparison).
 NOISE = 1e-9
 NOISE_NOTE = (f"Relative errors are left out ('-') for series at round-off level (below "
-              f"{NOISE:g} of the largest series of the same unit): they are zero in exact "
+              f"{NOISE:g} of the largest series of the same unit; moments also of the "
+              "largest force times the mechanism's size): they are zero in exact "
               "arithmetic.")
 ENERGY_NOTE = ("`E lost` is the kinetic energy lost at the event. It can be negative at a "
                "plastic impact under a prescribed driver: the driver's impulse does work on "
@@ -247,9 +248,22 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     top: dict[str, float] = {}
     for sd in series:
         top[sd.unit] = max(top.get(sd.unit, 0.0), sd.scale)
+    # Where every moment is round-off (no driver: A02's pins carry 2.7e-15 N m against
+    # 18 N), the largest force times the mechanism's size is the scale moments are
+    # measured against (the report showed a 150 % "error" of the pins' torques).
+    if "N m" in top and "N" in top:
+        top["N m"] = max(top["N m"], top["N"] * _size(a))
     for sd in series:
         sd.floor = max(NOISE * top[sd.unit], 1e-300)
     return Comparison(a, b, t, mask, series, match_events(a, b))
+
+
+def _size(res: Result) -> float:
+    """The mechanism's size, m: the largest distance of a body point from its body frame's
+    origin or of a ground point from the origin (1 m when there is none)."""
+    pts = [p for pts in res.meta.get("body_points", {}).values() for p in pts.values()]
+    pts += list(res.meta.get("ground", {}).values())
+    return max((math.hypot(*p) for p in pts), default=1.0) or 1.0
 
 
 def match_events(a: Result, b: Result) -> list[EventMatch]:

@@ -80,7 +80,7 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
         # beside the constraint rows) cannot be solved: it failed at t = 0 on a four-bar
         # below 1e-13 s. Shorter than the events' resolution, such a run says nothing.
         ok_t = need(False, "t_end", f"expected at least {ev.ZENO_DT:g} s with IDA (the "
-                    "run's time resolution; method='iterative' takes any end time)", t_end)
+                    "run's time resolution; the fixed-step algorithm takes any end time)", t_end)
     ok_rtol = need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol",
                    "expected 1e-15 <= rtol <= 1e-2", rtol)
     if atol is None and ok_rtol:
