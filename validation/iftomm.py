@@ -28,11 +28,12 @@ OUT = Path(__file__).resolve().parent / "out"
 
 def _ida_on(res, y0: np.ndarray, yp0: np.ndarray, grid: np.ndarray, rtol: float):
     """scikit-sundae's IDA on a residual, counting its steps (the root function runs once
-    a step, as in cmm_dae): (solution, steps)."""
+    a step, as in cmm_dae, and at output times, which are not steps): (solution, steps)."""
     steps, last = [0], [-1.0]
+    outs = set(grid.tolist())
 
     def events(t, y, yp, out):
-        if t > last[0]:
+        if t > last[0] and t not in outs:
             last[0] = t
             steps[0] += 1
         out[0] = 1.0
