@@ -26,9 +26,11 @@ from cmm_dae import iftomm
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def _ida_on(res, y0: np.ndarray, yp0: np.ndarray, grid: np.ndarray, rtol: float):
+def _ida_on(res, y0: np.ndarray, yp0: np.ndarray, grid: np.ndarray, rtol: float,
+            atol=None, algebraic=()):
     """scikit-sundae's IDA on a residual, counting its steps (the root function runs once
-    a step, as in cmm_dae, and at output times, which are not steps): (solution, steps)."""
+    a step, as in cmm_dae, and at output times, which are not steps): (solution, steps).
+    atol defaults to 1e-2 rtol, as cmm_dae's."""
     steps, last = [0], [-1.0]
     outs = set(grid.tolist())
 
@@ -39,8 +41,9 @@ def _ida_on(res, y0: np.ndarray, yp0: np.ndarray, grid: np.ndarray, rtol: float)
         out[0] = 1.0
 
     events.terminal, events.direction = [False], [0]
-    solver = sun.ida.IDA(res, rtol=rtol, atol=rtol * 1e-2, eventsfn=events, num_events=1,
-                         max_num_steps=100_000_000)
+    solver = sun.ida.IDA(res, rtol=rtol, atol=rtol * 1e-2 if atol is None else atol,
+                         eventsfn=events, num_events=1, max_num_steps=100_000_000,
+                         algebraic_idx=list(algebraic) or None)
     return solver.solve(grid, y0, yp0), steps[0]
 
 
