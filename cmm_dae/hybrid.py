@@ -100,6 +100,8 @@ class SegmentTrace:
     crossing_logged: bool = False
     #: whether IDA ran the segment with the multipliers out of its error test
     relaxed: bool = False
+    #: the factor on the multipliers' absolute tolerances (the run's force scale)
+    lambda_scale: float = 1.0
 
 
 def _key(locked: Locked) -> tuple:

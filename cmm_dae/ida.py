@@ -41,6 +41,12 @@ ATOL_LAMBDA = 1e-2
 ATOL_MU = 1e3
 #: The multipliers' absolute tolerance once a singular position has been crossed.
 ATOL_LAMBDA_SINGULAR = 1e3
+#: Force scale (N) up to which those tolerances stand as they are; above it they grow with
+#: the mechanism's force scale (:func:`lambda_scale`). In absolute terms they are what keeps
+#: the multipliers' error test loose enough for index-2 variables: the pendulum on a stop,
+#: its mass and inertia scaled by 1e5 (forces of 4e5 N), failed with 1e-2 N, where the
+#: relative tolerance on the multipliers took over; the shipped models start below 200 N.
+FORCE_REF = 1e3
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
 #: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
 SPARSE_FROM = 300
@@ -54,6 +60,25 @@ FALLING_RATIO = 0.1
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
 #: shipped models, so the margin leaves a factor of 500.
 PUSH_MARGIN = 0.1
+
+
+def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
+                 ) -> float:
+    """Factor on the multipliers' absolute tolerances for a run from (t, q, v).
+
+    The mechanism's force scale is the largest of its constraint forces, applied forces
+    and inertia forces (``M a``) at that state (N, or N m for moments); the factor is that
+    scale over :data:`FORCE_REF`, at least 1, so that the multipliers keep the same
+    relative tolerance however large the forces are.
+    """
+    p = model.fill(p, t, q, v)
+    try:
+        a, lam, _ = model.kkt(q, v, t, p)
+    except np.linalg.LinAlgError:  # a singular start is the policy's to report
+        return 1.0
+    qf = model._kkt_parts(q, v, t, p)[1]
+    force = max(float(np.max(np.abs(x), initial=0.0)) for x in (lam, qf, model.mass * a))
+    return max(1.0, force / FORCE_REF) if math.isfinite(force) else 1.0
 
 
 def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
@@ -111,6 +136,8 @@ class IdaIntegrator(Integrator):
                 shape=(model.N, model.N))}
         self.atol = np.concatenate([np.full(2 * nq, opts.atol), np.full(model.m, ATOL_LAMBDA),
                                     np.full(model.m, ATOL_MU)])
+        #: factor on the multipliers' absolute tolerances, from the forces at the start
+        self.lambda_scale = math.nan
         self.ev_out = np.zeros(0)
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
@@ -187,7 +214,8 @@ class IdaIntegrator(Integrator):
         microseconds instead of a dozen Python calls), with a second output below zero when
         a lock force is within the margin of its threshold. Cached per configuration."""
         hs, model = self.hs, self.model
-        key = self.ev_key = (tuple(self.triggers), hs.mode())
+        k = 1.0 if math.isnan(self.lambda_scale) else self.lambda_scale
+        key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
         fn = self._ev_cache.get(key)
         if fn is None:
             nq, m = model.nq, model.m
@@ -200,7 +228,7 @@ class IdaIntegrator(Integrator):
             if self.has_push:
                 push = ca.vertcat(*[vals[i] for i in self.push_idx])
                 near = ca.mmin(ca.fabs(push)) - (PUSH_MARGIN * ca.mmax(ca.fabs(lam))
-                                                 + 100.0 * ATOL_LAMBDA)
+                                                 + 100.0 * ATOL_LAMBDA * k)
             fn = Buffered(ca.Function("events", [y], [ca.vertcat(1.0, *vals), near]))
             self._ev_cache[key] = fn
         return fn
@@ -240,12 +268,20 @@ class IdaIntegrator(Integrator):
         control used them: they are kept in it by default because it makes runs with
         stops take fewer steps)."""
         self.relaxed = True
-        self.atol[2 * self.model.nq:2 * self.model.nq + self.model.m] = ATOL_LAMBDA_SINGULAR
+        self._lambda_atol()
+
+    def _lambda_atol(self) -> None:
+        nq, m = self.model.nq, self.model.m
+        k = 1.0 if math.isnan(self.lambda_scale) else self.lambda_scale
+        self.atol[2 * nq:2 * nq + m] = (ATOL_LAMBDA_SINGULAR if self.relaxed else ATOL_LAMBDA) * k
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
         model, opts, hs = self.model, self.opts, self.hs
         nq = model.nq
         self.p[:] = hs.p
+        if math.isnan(self.lambda_scale):  # the run's first segment: its force scale
+            self.lambda_scale = lambda_scale(model, self.p, t0, q, v)
+            self._lambda_atol()
         first_step, self.first_step = self.first_step, 0.0
         self.triggers = ev.event_list(model, hs.locked)
         self.push_idx = np.array([i for i, tr in enumerate(self.triggers)

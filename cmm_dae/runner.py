@@ -274,6 +274,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
                 seg.relaxed = bool(getattr(integ, "relaxed", False))
+                seg.lambda_scale = float(getattr(integ, "lambda_scale", 1.0))
                 trace.append(seg)
             for trig in end.triggers:
                 done = ev.handle(hs, trig, q, v, t, integ.policy)

@@ -171,7 +171,7 @@ class SensitivityPass(CrossingPass):
         t = t0
         while True:
             outs = [x for x in want if x > t + ev.ZENO_DT * max(1.0, abs(t))]
-            r, T, Y, S = self._ida(t, q, v, sq, sv, p, dP, outs, relaxed)
+            r, T, Y, S = self._ida(t, q, v, sq, sv, p, dP, outs, relaxed, seg.lambda_scale)
             # (after a failure the last row is the step IDA ended on, not an output time)
             rows = [k for k in range(T.size) if T[k] in outs]
             T_all += [float(T[k]) for k in rows]
@@ -220,9 +220,10 @@ class SensitivityPass(CrossingPass):
         self.sv[seg.n0:seg.n1] = Sv[idx]
         return q.copy(), v.copy(), Sq[-1].copy(), Sv[-1].copy()
 
-    def _ida(self, t0, q, v, sq, sv, p, dP, outs, relaxed):
+    def _ida(self, t0, q, v, sq, sv, p, dP, outs, relaxed, k=1.0):
         """IDA on the state and its sensitivities from t0 to the output times ``outs``;
-        (IDA's result, the times, states and sensitivities (n, N, P) after t0)."""
+        (IDA's result, the times, states and sensitivities (n, N, P) after t0). ``k``: the
+        run's factor on the multipliers' absolute tolerances (its force scale)."""
         model, eq = self.model, self.eq
         nq, m, N, P = model.nq, model.m, model.N, self.P
         a, lam, dz, _ = self.kkt_d(q, v, t0, p, dP, sq, sv)
@@ -268,7 +269,7 @@ class SensitivityPass(CrossingPass):
         scale[th == 0.0] = 1.0
         # the multipliers as the run had them (out of the test after a singular position)
         base = np.concatenate([np.full(2 * nq, self.atol), np.full(
-            m, ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA), np.full(m, ATOL_MU)])
+            m, (ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA) * k), np.full(m, ATOL_MU)])
         # the multipliers' sensitivities stay out of the error test (index-2 variables:
         # in it, IDA failed to converge at rtol 1e-12 on the double-folded mechanism)
         off = np.concatenate([np.zeros(2 * nq), np.full(2 * m, ATOL_OFF)])

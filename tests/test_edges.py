@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import subprocess
 import sys
 import zipfile
@@ -133,6 +134,43 @@ def test_tiny_end_times_and_a_bad_rtol(four_bar):
     with pytest.raises(cd.ModelError) as info:
         cd.run_dae(four_bar, 1.0, rtol=float("nan"))
     assert [p.key for p in info.value.problems] == ["rtol"]
+
+@pytest.mark.parametrize("mass_scale, g", [(1e9, 9.81), (1e-9, 9.81), (1.0, 9.81e6),
+                                           (1.0, 9.81e-6), (1e9, 9.81e6)])
+def test_huge_and_tiny_masses_and_gravity(mass_scale, g):
+    """The pendulum on a stop with its mass and inertia scaled by 1e9 stalled (steps of
+    4e-8 s) and under 1e6 m/s^2 IDA gave up at 5.2e-4 s: the multipliers' absolute
+    tolerance (1e-2 N) was fixed while the forces grew, so their relative tolerance became
+    the run's rtol, too tight for index-2 variables. Against closed forms: the fall time
+    by quadrature of the energy equation, and the statics at rest on the stop, rtol 1e-8
+    (the weight's moment) and 1e-12 of the weight (the pin force); the fall time's
+    derivative in the stop's angle, rtol 1e-8."""
+    from scipy.integrate import quad
+
+    m0, j0, d, th0, stop = 0.4, 3e-3, 0.15, 0.3, -0.6  # the file's rod, start and stop
+    mech = cd.with_params(cd.load(MODELS / "pendulum_stop.toml"), {
+        "bodies.rod.mass": m0 * mass_scale, "bodies.rod.inertia": j0 * mass_scale,
+        "gravity.y": -g})
+    io = j0 + m0 * d * d  # about the pivot (per unit mass scale)
+
+    def dt_du(u):  # theta = th0 - u^2 takes the square root out of the endpoint
+        return 2.0 * u / math.sqrt(2.0 * m0 * g * d * (math.sin(th0) - math.sin(th0 - u * u))
+                                   / io)
+
+    t_fall = quad(dt_du, 0.0, math.sqrt(th0 - stop), epsabs=0.0, epsrel=1e-13, limit=200)[0]
+    res = cd.run_dae(mech, 1.5 * t_fall, rtol=1e-10, output_dt=t_fall / 100)
+    assert [e.kind for e in res.events] == ["limit"]
+    assert res.events[0].t == pytest.approx(t_fall, rel=1e-8)
+    weight = m0 * mass_scale * g
+    pin = res.joint("O")
+    assert pin.torque[-1] == pytest.approx(weight * d * math.cos(stop), rel=1e-8)
+    assert np.allclose(pin.force[-1], [0.0, weight], rtol=0.0, atol=1e-12 * weight)
+    # the sensitivity pass replays the run with the same tolerances: d t_fall / d stop is
+    # minus one over the rate at the stop
+    sens = cd.sensitivities(mech, ["joints.O.limits.lower"], 1.5 * t_fall, rtol=1e-11,
+                            output_dt=t_fall / 100)
+    rate = math.sqrt(2.0 * m0 * g * d * (math.sin(th0) - math.sin(stop)) / io)
+    assert sens.event_times[0][0] == pytest.approx(-1.0 / rate, rel=1e-8)
 
 
 # ------------------------------------------------------------------ saved results
