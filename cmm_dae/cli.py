@@ -46,12 +46,24 @@ def _save(res, args) -> None:
         print(f"wrote {res.save(args.save)}")
 
 
+def _branch(text: str) -> str | tuple[str, int]:
+    """``--branch``: "continue" or JOINT:SIGN with SIGN +1, -1, + or -."""
+    if text == "continue":
+        return text
+    joint, _, sign = text.rpartition(":")
+    signs = {"+1": 1, "+": 1, "1": 1, "-1": -1, "-": -1}
+    if not joint or sign not in signs:
+        raise argparse.ArgumentTypeError(
+            f"expected 'continue' or JOINT:SIGN with SIGN +1 or -1 (e.g. G1:+1), got {text!r}")
+    return joint, signs[sign]
+
+
 def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
     res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
                    output_dt=args.output_dt, progress=args.progress, compiled=args.compiled,
-                   linsolver=args.linsolver)
+                   linsolver=args.linsolver, branch=args.branch)
     _summary(res)
     _save(res, args)
     return 0
@@ -279,6 +291,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run IDA's segments in C (needs a C compiler; built once, cached)")
     r.add_argument("--linsolver", choices=("auto", "dense", "sparse"), default="auto",
                    help="IDA's linear solver (auto: sparse from 300 unknowns)")
+    r.add_argument("--branch", type=_branch, default="continue", metavar="JOINT:SIGN",
+                   help="at singular positions take the branch on which JOINT moves with "
+                        "SIGN (+1 or -1), e.g. G1:+1 (default: continue, the branch of the "
+                        "motion)")
     r.set_defaults(func=_run)
 
     i = sub.add_parser("iterate", help="simulate a model with the paper's fixed-step algorithm")

@@ -108,6 +108,33 @@ class Recorder:
                              np.array(v, dtype=float), np.full(t.size, c, dtype=int)))
         self._n += t.size
 
+    def since(self, n0: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times, positions and velocities of the samples from index ``n0`` on."""
+        self._flush()
+        rows: list[tuple] = []
+        start = 0
+        for b in self._blocks:
+            end = start + b[0].size
+            if end > n0:
+                k = max(n0 - start, 0)
+                rows.append((b[0][k:], b[1][k:], b[2][k:]))
+            start = end
+        if not rows:
+            return np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0))
+        return tuple(np.concatenate([r[i] for r in rows]) for i in range(3))
+
+    def truncate(self, n: int) -> None:
+        """Drop the samples from index ``n`` on (a stretch the run takes again)."""
+        self._flush()
+        start, kept = 0, []
+        for b in self._blocks:
+            end = start + b[0].size
+            if start < n:
+                k = min(n, end) - start
+                kept.append(tuple(x[:k] for x in b))
+            start = end
+        self._blocks, self._n = kept, min(self._n, n)
+
     def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         self._flush()
         if not self._blocks:

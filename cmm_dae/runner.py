@@ -24,9 +24,10 @@ from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
-from .integrator import Integrator, Recorder, RunOptions
+from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .iterative import IterativeIntegrator
 from .mechanism import Mechanism, require_mechanism
+from .passage import missed_passage
 from .post import build_result
 from .progress import Bar
 from .result import Event, Result, Stats
@@ -176,7 +177,10 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     branch : "continue" or (joint, sign)
         Which branch to take at a singular position: the branch of the motion (continuity
         of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
-        or -1; where one loop is singular at a time).
+        or -1). Other branches are found where one loop is singular at a time; where
+        several are, a rule that needs a switch ends the run as a dead point. With a
+        rule, IDA's samples are searched for singular positions it integrated through
+        without stopping (the rule is applied at each one's instant).
     compiled : bool
         IDA: run each configuration segment in C (IDA, the residual, its Jacobian and the
         event functions; built with the system C compiler on first use and cached). Same
@@ -268,8 +272,11 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             seg = None if trace is None else ev.SegmentTrace(
                 t, q.copy(), v.copy(), hs.p.copy(), dict(hs.locked), hs.zones, dict(hs.slip),
                 dict(hs.stick_at), len(rec))
+            n0 = len(rec)
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
+            if opts.branch is not None and cls.method == "ida":
+                end = _watch_passage(hs.model, hs.p, t, q, v, rec, n0, end)
             t, q, v = end.t, end.q, end.v
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
@@ -327,6 +334,23 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                           configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err
     return res
+
+
+def _watch_passage(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                   rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
+    """With a branch rule: the segment cut back to the last sample before a singular
+    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
+    meets it again), to be crossed there; else the segment's end as it was."""
+    ts, qs, vs = rec.since(n0)
+    ts, qs, vs = [np.concatenate([[a], b]) for a, b in ((t, ts), (q, qs), (v, vs))] \
+        if ts.size else (np.array([t]), q[None], v[None])
+    if end.t > ts[-1]:
+        ts, qs, vs = (np.append(ts, end.t), np.vstack([qs, end.q]), np.vstack([vs, end.v]))
+    j = missed_passage(model, p, ts, qs, vs)
+    if j is None:
+        return end
+    rec.truncate(n0 + j)
+    return SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")
 
 
 def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:

@@ -248,10 +248,37 @@ def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     return out
 
 
-def _choose(model: Model, v: np.ndarray, others: list[np.ndarray], q: np.ndarray,
-            rule: tuple[str, int]) -> tuple[np.ndarray, bool]:
+def _rank_drop(model: Model, p: np.ndarray, t: float, q: np.ndarray) -> int:
+    """How many singular values of the active constraint rows collapse at q."""
+    sv = np.linalg.svd(model.constraints(q, t, p).Phi_q[model.active_rows(p)],
+                       compute_uv=False)
+    return int(np.sum(sv <= 1e-6 * sv[0])) if sv.size else 0
+
+
+def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                   a0: np.ndarray, tau: float, nsub: int) -> float:
+    """Time from t to the singular instant along the Gauss steps themselves, s (``tau``
+    from the second-order path ahead is good to its error, too rough to apply a branch
+    rule at the instant where the crossing starts far from it): ``nsub`` steps of
+    ``tau / nsub`` and two beyond bracket it; their signed smallest singular value's root."""
+    h = tau / nsub
+    qq, vv, tt, guess = q, v, t, a0
+    ends = [(t, q, v)]
+    try:
+        for _ in range(nsub + 2):
+            qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
+            tt += h
+            ends.append((tt, qq, vv))
+    except np.linalg.LinAlgError:
+        return tau
+    return singular_instant(model, p, ends, t + tau) - t
+
+
+def _choose(model: Model, v: np.ndarray, others: list[np.ndarray] | None, q: np.ndarray,
+            rule: tuple[str, int], t: float) -> tuple[np.ndarray, bool]:
     """The velocity whose joint ``rule[0]`` moves with the sign ``rule[1]``, the branch
-    of the motion first; (velocity, switched)."""
+    of the motion first; (velocity, switched). ``others`` None: the other branches are
+    not known (several loops singular at once)."""
     joint, sign = rule
     k = model.jidx[joint]
 
@@ -261,12 +288,20 @@ def _choose(model: Model, v: np.ndarray, others: list[np.ndarray], q: np.ndarray
     scale = max(float(np.max(np.abs(v))), 1e-300)
     if rate(v) * sign > 1e-9 * scale:
         return v, False
+    if others is None:
+        raise SolverError(f"joint '{joint}' would need another branch through the "
+                          f"singular position at t = {t:.9g} s, but several loops are "
+                          "singular at once here (rank drop above 1) and cmm_dae enumerates "
+                          "branches only where one is: run with branch='continue' or a rule "
+                          "the motion keeps",
+                          status=Status.DEAD_POINT)
     for cand in others:
         # another branch, moving on (not back along the way it came)
         if rate(cand) * sign > 1e-9 * scale and float(cand @ (model.mass * v)) > -0.999 * \
                 float(v @ (model.mass * v)):
             return cand, True
-    raise SolverError(f"no branch through the singular position moves joint '{joint}' "
+    raise SolverError(f"no branch through the singular position at t = {t:.9g} s moves "
+                      f"joint '{joint}' "
                       f"{'forwards' if sign > 0 else 'backwards'}", status=Status.DEAD_POINT)
 
 
@@ -324,6 +359,12 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     past = rate >= 0.0
     if past and not r0 < PAST_RATIO:
         raise dead("the motion does not approach a singular position: it cannot go on")
+    if past and rule is not None:
+        raise SolverError(f"at t = {t:.9g} s the integrator had stepped across a singular "
+                          f"position of {', '.join(labels) or 'the mechanism'} before it "
+                          "failed, so the branch rule cannot be applied at its instant; "
+                          "a tighter rtol stops it before the instant",
+                          status=Status.DEAD_POINT)
     if past:
         # the integrator stepped across the singular instant itself and failed just
         # beyond it: the instant lies behind, where the ratio extrapolates to zero; only
@@ -353,7 +394,12 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         # r0 * 0.211 / nsub).
         h_ok = _accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
         nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / NODE_RATIO))
-        if nsub >= 2:
+        if rule is not None:
+            # a branch rule is applied at the singular instant: a step must end there
+            nsub = max(nsub, 1)
+        if rule is not None:
+            tau = _instant_ahead(model, p, t, q, v, a0, tau, nsub)
+        if nsub >= 2 or rule is not None:
             h = tau / nsub
         else:
             # The integrator came so close that even a step ending at the singular
@@ -367,6 +413,10 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
     # restart reliably) would take more than 100 of them: then growing ones.
     target = max(AFTER * r0, END_RATIO, 4.0 * r0) if past else max(AFTER * r0, 0.2 * END_RATIO)
+    if rule is not None:
+        # a crossing the branch rule asked for may start where IDA was still doing well
+        # (the samples before a position it stepped over): out to twice that ratio
+        target = min(target, max(2.0 * r0, AFTER * END_RATIO))
     way_out = (target - r0) / max(abs(rate), 1e-300) + tau
     grow = 1.0 if way_out <= 100 * h else 1.1
     # never longer than the accurate step (but at most MAX_STEPS_OUT steps out)
@@ -386,7 +436,10 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             ends.append((tt, qq, vv))
             if k == nsub - 1 and rule is not None:  # at the singular instant: which way
                 qs, vs, _ = _project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
-                vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs, rule)
+                others = _branches(model, p, tt, qs, vs)
+                if not others and _rank_drop(model, p, tt, qs) > 1:
+                    others = None  # not enumerated: only the branch of the motion is known
+                vnew, switched = _choose(model, vs, others, qs, rule, tt)
                 if switched:  # else the motion goes on undisturbed
                     qq, vv = qs, vnew
                     ends.append((tt, qq, vv))  # the same instant again: the new branch

@@ -265,6 +265,18 @@ def test_cli_edges(tmp_path, saved):
     assert r.returncode == 2 and "expected 1 to 1000000 values" in one_line_error(r)
 
 
+def test_cli_branch_option():
+    """``cmm-dae run --branch JOINT:SIGN``: a rule the motion keeps is logged with the
+    crossing; a malformed rule or an unknown joint is refused by name."""
+    r = cli("run", "iftomm_a02_four_bar_N1", "--t-end", "1.0", "--branch", "G1:-1")
+    assert r.returncode == 0 and "continue (G1 -)" in r.stdout
+    for bad, said in (("G1:2", "expected 'continue' or JOINT:SIGN"),
+                      ("G1", "expected 'continue' or JOINT:SIGN"),
+                      ("X:+1", "[run] branch: expected")):
+        r = cli("run", "iftomm_a02_four_bar_N1", "--t-end", "1.0", "--branch", bad)
+        assert r.returncode == 2 and said in one_line_error(r), (bad, r.stderr)
+
+
 def test_cli_quiet_on_a_closed_pipe():
     r = subprocess.run(f"{sys.executable} -m cmm_dae.cli structure models/nipper_swing.toml "
                        "| head -n 1", shell=True, capture_output=True, text=True, cwd=ROOT,

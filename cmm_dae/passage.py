@@ -1,0 +1,95 @@
+"""Singular positions IDA stepped over without noticing, found where a branch rule needs them.
+
+IDA integrates through a singular position on the branch of the motion whenever its steps
+happen to straddle the instant (at rtol 1e-8 it does so at most of them): the motion is
+smooth there, only the constraint Jacobian loses rank for an instant. That is right for
+``branch = "continue"``, but a branch rule has to be applied *at* the instant, so with a rule
+every segment's samples are searched for a passage: a dip of the constraints'
+singular-value ratio that the cubic Hermite interpolant of the samples (positions and their
+rates) takes close to zero. The run then goes back to the last sample before it and crosses
+it as if IDA had stopped there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .equations import Model
+from .kinematics import singular_ratio
+
+#: A sample whose singular-value ratio is a local minimum below this is looked at closely.
+WATCH_RATIO = 0.3
+#: ... and the motion passes a singular position where the interpolant's ratio falls below
+#: this (it falls linearly to zero at the instant; elsewhere a well-posed mechanism stays
+#: far above it).
+PASSAGE_RATIO = 1e-3
+#: The crossing starts from the last sample before the passage whose ratio is at least
+#: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
+START_RATIO = 0.01
+#: Points per sample interval at which the interpolant's ratio is evaluated.
+POINTS = 64
+
+
+def _hermite(t0: float, q0: np.ndarray, v0: np.ndarray, t1: float, q1: np.ndarray,
+             v1: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Positions on the cubic Hermite interpolant at the fractions ``s`` of [t0, t1]."""
+    h = t1 - t0
+    s = s[:, None]
+    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * q0 + h10 * h * v0 + h01 * q1 + h11 * h * v1
+
+
+def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
+                   v: np.ndarray) -> int | None:
+    """The sample to cross from, or None when the samples pass no singular position.
+
+    Parameters
+    ----------
+    model, p : Model, ndarray
+        The equations and the configuration's parameters.
+    t : ndarray, (n,)
+        Sample times of one IDA segment, s, its start first (distinct and increasing).
+    q, v : ndarray, (n, nq)
+        Positions and velocities there.
+
+    Returns
+    -------
+    int or None
+        Index of the last sample before the first passage (with a singular-value ratio of
+        at least :data:`START_RATIO` where there is one), None if there is none.
+    """
+    n = t.size
+    if n < 2:
+        return None
+    r = np.array([singular_ratio(model, q[i], float(t[i]), p) for i in range(n)])
+    s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
+    for i in range(n):
+        lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+        if not (r[i] < WATCH_RATIO and r[i] <= r[lo] and r[i] <= r[hi]):
+            continue
+        for a in range(lo, hi):  # the intervals on either side of the dipping sample
+            if t[a + 1] <= t[a]:
+                continue
+            qs = _hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], s)
+            ts = t[a] + s * (t[a + 1] - t[a])
+            rs = np.array([singular_ratio(model, qs[k], float(ts[k]), p)
+                           for k in range(s.size)])
+            k = int(np.argmin(rs))
+            # the ratio dips in a V to zero: the grid may step over its tip, a bounded
+            # search between the grid's neighbours finds it
+            lo_s, hi_s = s[max(k - 1, 0)], s[min(k + 1, s.size - 1)]
+
+            def at(x: float, a: int = a) -> float:
+                qx = _hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], np.array([x]))
+                return singular_ratio(model, qx[0], float(t[a] + x * (t[a + 1] - t[a])), p)
+
+            best = minimize_scalar(at, bounds=(lo_s, hi_s), method="bounded",
+                                   options={"xatol": 1e-9})
+            if min(float(rs[k]), float(best.fun)) < PASSAGE_RATIO:
+                j = a
+                while j > 0 and r[j] < START_RATIO:
+                    j -= 1
+                return j
+    return None
