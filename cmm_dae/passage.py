@@ -17,6 +17,7 @@ from scipy.optimize import minimize_scalar
 
 from .equations import Model
 from .kinematics import singular_ratio
+from .singular_instant import hermite
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
 WATCH_RATIO = 0.3
@@ -29,16 +30,6 @@ PASSAGE_RATIO = 1e-3
 START_RATIO = 0.01
 #: Points per sample interval at which the interpolant's ratio is evaluated.
 POINTS = 64
-
-
-def _hermite(t0: float, q0: np.ndarray, v0: np.ndarray, t1: float, q1: np.ndarray,
-             v1: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Positions on the cubic Hermite interpolant at the fractions ``s`` of [t0, t1]."""
-    h = t1 - t0
-    s = s[:, None]
-    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-    return h00 * q0 + h10 * h * v0 + h01 * q1 + h11 * h * v1
 
 
 def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
@@ -72,19 +63,17 @@ def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
         for a in range(lo, hi):  # the intervals on either side of the dipping sample
             if t[a + 1] <= t[a]:
                 continue
-            qs = _hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], s)
-            ts = t[a] + s * (t[a + 1] - t[a])
-            rs = np.array([singular_ratio(model, qs[k], float(ts[k]), p)
-                           for k in range(s.size)])
+            ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
+
+            def at(x: float, ends: tuple = ends) -> float:  # x: fraction of the interval
+                tx = float(ends[0] + x * (ends[3] - ends[0]))
+                return singular_ratio(model, hermite(*ends, tx)[0], tx, p)
+
+            rs = np.array([at(x) for x in s])
             k = int(np.argmin(rs))
             # the ratio dips in a V to zero: the grid may step over its tip, a bounded
             # search between the grid's neighbours finds it
             lo_s, hi_s = s[max(k - 1, 0)], s[min(k + 1, s.size - 1)]
-
-            def at(x: float, a: int = a) -> float:
-                qx = _hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], np.array([x]))
-                return singular_ratio(model, qx[0], float(t[a] + x * (t[a + 1] - t[a])), p)
-
             best = minimize_scalar(at, bounds=(lo_s, hi_s), method="bounded",
                                    options={"xatol": 1e-9})
             if min(float(rs[k]), float(best.fun)) < PASSAGE_RATIO:
