@@ -62,6 +62,13 @@ FALLING_RATIO = 0.1
 PUSH_MARGIN = 0.1
 
 
+def lambda_atol(relaxed: bool, scale: float) -> float:
+    """The multipliers' absolute tolerance in IDA's error test: :data:`ATOL_LAMBDA`, or
+    :data:`ATOL_LAMBDA_SINGULAR` once they are ``relaxed``, times the run's force
+    ``scale`` (:func:`lambda_scale`)."""
+    return (ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA) * scale
+
+
 def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
                  ) -> float:
     """Factor on the multipliers' absolute tolerances for a run from (t, q, v).
@@ -72,11 +79,11 @@ def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
     relative tolerance however large the forces are.
     """
     p = model.fill(p, t, q, v)
+    Phi_q, qf, gamma = model._kkt_parts(q, v, t, p)
     try:
-        a, lam, _ = model.kkt(q, v, t, p)
+        a, lam, _ = model.kkt_from(Phi_q, qf, gamma, p)
     except np.linalg.LinAlgError:  # a singular start is the policy's to report
         return 1.0
-    qf = model._kkt_parts(q, v, t, p)[1]
     force = max(float(np.max(np.abs(x), initial=0.0)) for x in (lam, qf, model.mass * a))
     return max(1.0, force / FORCE_REF) if math.isfinite(force) else 1.0
 
@@ -137,7 +144,9 @@ class IdaIntegrator(Integrator):
         self.atol = np.concatenate([np.full(2 * nq, opts.atol), np.full(model.m, ATOL_LAMBDA),
                                     np.full(model.m, ATOL_MU)])
         #: factor on the multipliers' absolute tolerances, from the forces at the start
-        self.lambda_scale = math.nan
+        #: (set by the first segment)
+        self.lambda_scale = 1.0
+        self._scaled = False
         self.ev_out = np.zeros(0)
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
@@ -214,7 +223,7 @@ class IdaIntegrator(Integrator):
         microseconds instead of a dozen Python calls), with a second output below zero when
         a lock force is within the margin of its threshold. Cached per configuration."""
         hs, model = self.hs, self.model
-        k = 1.0 if math.isnan(self.lambda_scale) else self.lambda_scale
+        k = self.lambda_scale
         key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
         fn = self._ev_cache.get(key)
         if fn is None:
@@ -272,15 +281,14 @@ class IdaIntegrator(Integrator):
 
     def _lambda_atol(self) -> None:
         nq, m = self.model.nq, self.model.m
-        k = 1.0 if math.isnan(self.lambda_scale) else self.lambda_scale
-        self.atol[2 * nq:2 * nq + m] = (ATOL_LAMBDA_SINGULAR if self.relaxed else ATOL_LAMBDA) * k
+        self.atol[2 * nq:2 * nq + m] = lambda_atol(self.relaxed, self.lambda_scale)
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
         model, opts, hs = self.model, self.opts, self.hs
         nq = model.nq
         self.p[:] = hs.p
-        if math.isnan(self.lambda_scale):  # the run's first segment: its force scale
-            self.lambda_scale = lambda_scale(model, self.p, t0, q, v)
+        if not self._scaled:  # the run's first segment: its force scale
+            self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v), True
             self._lambda_atol()
         first_step, self.first_step = self.first_step, 0.0
         self.triggers = ev.event_list(model, hs.locked)

@@ -14,7 +14,7 @@ from .assembly import start_spec
 from .equations import Buffered, Model
 from .errors import SolverError, Status
 from .hybrid import SegmentTrace
-from .ida import ATOL_LAMBDA, ATOL_LAMBDA_SINGULAR, ATOL_MU
+from .ida import ATOL_MU, lambda_atol
 from .result import Result
 from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
@@ -268,8 +268,8 @@ class SensitivityPass(CrossingPass):
         scale = np.maximum(np.abs(th), 1e-300)
         scale[th == 0.0] = 1.0
         # the multipliers as the run had them (out of the test after a singular position)
-        base = np.concatenate([np.full(2 * nq, self.atol), np.full(
-            m, (ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA) * k), np.full(m, ATOL_MU)])
+        base = np.concatenate([np.full(2 * nq, self.atol), np.full(m, lambda_atol(relaxed, k)),
+                               np.full(m, ATOL_MU)])
         # the multipliers' sensitivities stay out of the error test (index-2 variables:
         # in it, IDA failed to converge at rtol 1e-12 on the double-folded mechanism)
         off = np.concatenate([np.zeros(2 * nq), np.full(2 * m, ATOL_OFF)])

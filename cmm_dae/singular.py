@@ -202,7 +202,7 @@ def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
 
 
 def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
-              ) -> list[np.ndarray]:
+              ) -> list[np.ndarray] | None:
     """Velocities of the other branches through the singular position q (rank drop 1).
 
     A branch's tangent v keeps the velocity constraints and the acceleration-level one
@@ -210,11 +210,14 @@ def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     drop out: ``w . gamma(q, v, t) = 0`` (quadratic in v). With a driver the velocities
     are ``v + c n`` (n the new null direction; c = 0 is the branch of the motion); without
     one, the kinetic energy is kept and the tangents are the roots of a quadratic form on
-    the two-dimensional null space."""
+    the two-dimensional null space. None where several singular values collapse at once
+    (several loops singular): those branches are not enumerated."""
     act = model.active_rows(p)
     J = model.constraints(q, t, p).Phi_q[act]
     U, sv, Vt = np.linalg.svd(J)
     rank = int(np.sum(sv > 1e-8 * sv[0]))
+    if min(J.shape) - rank > 1:
+        return None  # several loops singular at once: not enumerated
     w = U[:, rank] if rank < U.shape[1] else None
     null = Vt[rank:].T
     if w is None or null.shape[1] == 0:
@@ -246,13 +249,6 @@ def _branches(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
                 if np.linalg.norm((cand - v) * Mh) > 1e-3 * scale:  # not the motion's own
                     out.append(cand)
     return out
-
-
-def _rank_drop(model: Model, p: np.ndarray, t: float, q: np.ndarray) -> int:
-    """How many singular values of the active constraint rows collapse at q."""
-    sv = np.linalg.svd(model.constraints(q, t, p).Phi_q[model.active_rows(p)],
-                       compute_uv=False)
-    return int(np.sum(sv <= 1e-6 * sv[0])) if sv.size else 0
 
 
 def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
@@ -360,11 +356,9 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     if past and not r0 < PAST_RATIO:
         raise dead("the motion does not approach a singular position: it cannot go on")
     if past and rule is not None:
-        raise SolverError(f"at t = {t:.9g} s the integrator had stepped across a singular "
-                          f"position of {', '.join(labels) or 'the mechanism'} before it "
-                          "failed, so the branch rule cannot be applied at its instant; "
-                          "a tighter rtol stops it before the instant",
-                          status=Status.DEAD_POINT)
+        raise dead("the integrator had stepped across the instant before it failed, so "
+                   "the branch rule cannot be applied there; a tighter rtol stops it "
+                   "before the instant")
     if past:
         # the integrator stepped across the singular instant itself and failed just
         # beyond it: the instant lies behind, where the ratio extrapolates to zero; only
@@ -395,9 +389,9 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         h_ok = _accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
         nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / NODE_RATIO))
         if rule is not None:
-            # a branch rule is applied at the singular instant: a step must end there
+            # a branch rule is applied at the singular instant: a step must end there,
+            # at the instant itself
             nsub = max(nsub, 1)
-        if rule is not None:
             tau = _instant_ahead(model, p, t, q, v, a0, tau, nsub)
         if nsub >= 2 or rule is not None:
             h = tau / nsub
@@ -436,10 +430,8 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             ends.append((tt, qq, vv))
             if k == nsub - 1 and rule is not None:  # at the singular instant: which way
                 qs, vs, _ = _project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
-                others = _branches(model, p, tt, qs, vs)
-                if not others and _rank_drop(model, p, tt, qs) > 1:
-                    others = None  # not enumerated: only the branch of the motion is known
-                vnew, switched = _choose(model, vs, others, qs, rule, tt)
+                vnew, switched = _choose(model, vs, _branches(model, p, tt, qs, vs), qs,
+                                         rule, tt)
                 if switched:  # else the motion goes on undisturbed
                     qq, vv = qs, vnew
                     ends.append((tt, qq, vv))  # the same instant again: the new branch
