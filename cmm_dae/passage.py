@@ -16,6 +16,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .equations import Model
+from .integrator import Recorder, SegmentEnd
 from .kinematics import singular_ratio
 from .singular_instant import hermite
 
@@ -82,3 +83,20 @@ def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
                     j -= 1
                 return j
     return None
+
+
+def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                   rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
+    """With a branch rule: the segment cut back to the last sample before a singular
+    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
+    meets it again), to be crossed there; else the segment's end as it was."""
+    ts, qs, vs = rec.since(n0)
+    ts, qs, vs = [np.concatenate([[a], b]) for a, b in ((t, ts), (q, qs), (v, vs))] \
+        if ts.size else (np.array([t]), q[None], v[None])
+    if end.t > ts[-1]:
+        ts, qs, vs = (np.append(ts, end.t), np.vstack([qs, end.q]), np.vstack([vs, end.v]))
+    j = missed_passage(model, p, ts, qs, vs)
+    if j is None:
+        return end
+    rec.truncate(n0 + j)
+    return SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")

@@ -24,10 +24,10 @@ from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
-from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
+from .integrator import Integrator, Recorder, RunOptions
 from .iterative import IterativeIntegrator
 from .mechanism import Mechanism, require_mechanism
-from .passage import missed_passage
+from .passage import watch_segment
 from .post import build_result
 from .progress import Bar
 from .result import Event, Result, Stats
@@ -276,7 +276,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
             if opts.branch is not None and cls.method == "ida":
-                end = _watch_passage(hs.model, hs.p, t, q, v, rec, n0, end)
+                end = watch_segment(hs.model, hs.p, t, q, v, rec, n0, end)
             t, q, v = end.t, end.q, end.v
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
@@ -334,23 +334,6 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                           configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err
     return res
-
-
-def _watch_passage(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                   rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
-    """With a branch rule: the segment cut back to the last sample before a singular
-    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
-    meets it again), to be crossed there; else the segment's end as it was."""
-    ts, qs, vs = rec.since(n0)
-    ts, qs, vs = [np.concatenate([[a], b]) for a, b in ((t, ts), (q, qs), (v, vs))] \
-        if ts.size else (np.array([t]), q[None], v[None])
-    if end.t > ts[-1]:
-        ts, qs, vs = (np.append(ts, end.t), np.vstack([qs, end.q]), np.vstack([vs, end.v]))
-    j = missed_passage(model, p, ts, qs, vs)
-    if j is None:
-        return end
-    rec.truncate(n0 + j)
-    return SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")
 
 
 def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:

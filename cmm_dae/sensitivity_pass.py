@@ -14,11 +14,11 @@ from .assembly import start_spec
 from .equations import Buffered, Model
 from .errors import SolverError, Status
 from .hybrid import SegmentTrace
-from .ida import ATOL_MU, lambda_atol
 from .result import Result
 from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
 from .singular import step_over
+from .tolerances import ATOL_MU, lambda_atol
 
 __all__ = ["ATOL_OFF", "LOOSE", "SensitivityPass"]
 
