@@ -27,7 +27,7 @@ from . import events as ev
 from .equations import Buffered, Model
 from .errors import CmmError, SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
-from .kinematics import singular_ratio
+from .kinematics import project_state, singular_ratio
 from .result import Stats
 from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
 
@@ -265,8 +265,7 @@ class IdaIntegrator(Integrator):
         self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
         # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
-        q = ev.project_positions(model, q, t0, self.p)
-        v = ev.project_velocities(model, q, v, t0, self.p)
+        q, v = project_state(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
         self.ratio0 = singular_ratio(model, q, t0, self.p)
         y0 = np.concatenate([q, v, lam, np.zeros(model.m)])

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .hybrid import SegmentTrace
-from .kinematics import project_positions, project_velocities, singular_ratio
+from .kinematics import project_state, singular_ratio
 from .singular import _A, _B, _gl2_step
 from .singular_instant import hermite, null_vectors
 
@@ -101,9 +101,8 @@ class CrossingPass:
             guess = self.model.kkt(q0, v0, t0, p)[0]
             q0, v0, sq0, sv0, _ = self._gauss_tangent(t0, q0, v0, sq0, sv0, t - t0, guess,
                                                       p, dP)
-        q1 = project_positions(self.model, q0, t, p)
-        return self.project(q1, project_velocities(self.model, q1, v0, t, p), t, p, dP,
-                            sq0, sv0)
+        q1, v1 = project_state(self.model, q0, v0, t, p)
+        return self.project(q1, v1, t, p, dP, sq0, sv0)
 
     def _replay(self, cr, sq, sv, p, dP) -> list:
         """The crossing's Gauss steps again from its start, with their tangents: the step

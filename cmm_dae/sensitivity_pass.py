@@ -14,6 +14,7 @@ from .assembly import start_spec
 from .equations import Buffered, Model
 from .errors import SolverError, Status
 from .hybrid import SegmentTrace
+from .kinematics import project_state
 from .result import Result
 from .sensitivity_crossing import CrossingPass
 from .sensitivity_model import Equations
@@ -146,8 +147,7 @@ class SensitivityPass(CrossingPass):
         p = seg.p
         dP = self.dp_of(p)
         t0 = seg.t0
-        q = ev.project_positions(model, seg.q, t0, p)
-        v = ev.project_velocities(model, q, seg.v, t0, p)
+        q, v = project_state(model, seg.q, seg.v, t0, p)
         sq, sv = self.project(q, v, t0, p, dP, sq, sv)
         times = self.res.t[seg.n0:seg.n1]
         for i in range(seg.n0, seg.n1):

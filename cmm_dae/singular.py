@@ -38,7 +38,7 @@ from scipy.optimize import minimize_scalar
 from .branches import choose_branch, other_branches
 from .equations import Model
 from .errors import SolverError, Status
-from .kinematics import dependent_rows, project_positions, project_velocities
+from .kinematics import dependent_rows, project_state
 from .singular_instant import singular_instant
 
 #: Gauss-Legendre, two stages (order 4): nodes and coefficients.
@@ -197,9 +197,8 @@ def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float
     largest position change. At the singular instant itself pass ``rcond``: the
     collapsing singular value then counts as zero instead of amplifying the round-off
     (its inverse took 3.6e-5 J of 31 J of kinetic energy off a branch switch)."""
-    q1 = project_positions(model, q, t, p, rcond)
-    return q1, project_velocities(model, q1, v, t, p, rcond), float(np.max(np.abs(q1 - q),
-                                                                           initial=0.0))
+    q1, v1 = project_state(model, q, v, t, p, rcond)
+    return q1, v1, float(np.max(np.abs(q1 - q), initial=0.0))
 
 
 def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
