@@ -85,11 +85,30 @@ def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     return None
 
 
-def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                   rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
-    """With a branch rule: the segment cut back to the last sample before a singular
-    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
-    meets it again), to be crossed there; else the segment's end as it was."""
+def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                rec: Recorder, n0: int, end: SegmentEnd) -> tuple[int, SegmentEnd] | None:
+    """Where a segment would be cut back to cross a singular position its samples pass.
+
+    Parameters
+    ----------
+    model, p : Model, ndarray
+        The equations and the configuration's parameters.
+    t, q, v : float, ndarray, ndarray
+        The segment's start (s, positions, velocities).
+    rec : Recorder
+        The run's samples; the segment's are those from index ``n0`` on.
+    n0 : int
+        Index of the segment's first sample in ``rec``.
+    end : SegmentEnd
+        How the segment ended.
+
+    Returns
+    -------
+    tuple of (int, SegmentEnd) or None
+        The number of samples to keep and the segment's new end (reason ``"singular"``,
+        at the last sample before the first passage), None when the samples pass none.
+        Nothing is changed: the caller truncates ``rec``.
+    """
     ts, qs, vs = rec.since(n0)
     ts, qs, vs = [np.concatenate([[a], b]) for a, b in ((t, ts), (q, qs), (v, vs))] \
         if ts.size else (np.array([t]), q[None], v[None])
@@ -97,6 +116,17 @@ def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nd
         ts, qs, vs = (np.append(ts, end.t), np.vstack([qs, end.q]), np.vstack([vs, end.v]))
     j = missed_passage(model, p, ts, qs, vs)
     if j is None:
+        return None
+    return n0 + j, SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")
+
+
+def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                  rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
+    """With a branch rule: the segment cut back to the last sample before a singular
+    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
+    meets it again), to be crossed there; else the segment's end as it was."""
+    cut = passage_cut(model, p, t, q, v, rec, n0, end)
+    if cut is None:
         return end
-    rec.truncate(n0 + j)
-    return SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")
+    rec.truncate(cut[0])
+    return cut[1]

@@ -12,8 +12,10 @@ end time or to the next trigger.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,10 +26,10 @@ from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
-from .integrator import Integrator, Recorder, RunOptions
+from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .iterative import IterativeIntegrator
 from .mechanism import Mechanism, require_mechanism
-from .passage import watch_segment
+from .passage import passage_cut, watch_segment
 from .post import build_result
 from .progress import Bar
 from .result import Event, Result, Stats
@@ -275,8 +277,14 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             n0 = len(rec)
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
+            retry = None
             if opts.branch is not None and cls.method == "ida":
                 end = watch_segment(hs.model, hs.p, t, q, v, rec, n0, end)
+            elif end.reason == "singular" and not end.triggers and cls.method == "ida":
+                # where IDA gave up close to the instant, a crossing from its last state
+                # can start too near (the accelerations there are ruled by round-off): if
+                # it fails, it is tried again from the last sample well before (A02, N = 40)
+                retry = functools.partial(passage_cut, hs.model, hs.p, t, q, v, rec, n0, end)
             t, q, v = end.t, end.q, end.v
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
@@ -300,7 +308,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 integ.after_events(done)
             if end.reason == "singular":
                 n_events = len(events)
-                cr = _cross_singular(hs, integ, t, q, v, opts, rec, events, after)
+                cr = _cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events
@@ -351,11 +359,27 @@ def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:
 
 def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
                     v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
-                    after: list[int]) -> Crossing:
+                    after: list[int],
+                    retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None
+                    ) -> Crossing:
     """Cross the singular position ahead of (t, q, v): the crossing (with the state after
-    it), one sample there and a "singular" event at the singular instant."""
-    cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
-                   atol=opts.atol)
+    it), one sample there and a "singular" event at the singular instant. ``retry`` gives
+    (the samples to keep, an earlier state) to start again from if the crossing from
+    (t, q, v) finds a dead point."""
+    try:
+        cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
+                       atol=opts.atol)
+    except SolverError as e:
+        cut = None if retry is None or e.status != Status.DEAD_POINT else retry()
+        if cut is None or cut[1].t >= t:
+            raise
+        t, q, v = cut[1].t, cut[1].q, cut[1].v
+        try:
+            cr = step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
+                           atol=opts.atol)
+        except SolverError:
+            raise e from None
+        rec.truncate(cut[0])  # the samples IDA took beyond the new start
     cfg = hs.current()
     # the output grid inside the crossing's window, from its own steps (a window can be
     # 0.3 s long where the integrator gave up early, at tight tolerances)
