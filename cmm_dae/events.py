@@ -29,7 +29,7 @@ from .hybrid import (
     Transition,
     Trigger,
 )
-from .kinematics import dependent_rows, impact_map, project_positions, project_velocities
+from .kinematics import dependent_rows, impact_map, project_positions, project_velocities, row_names
 from .result import Event
 from .zones import _zone_margin, initial_zones, pick, zone_switch
 
@@ -331,7 +331,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         drivers = ", ".join(f"driver {d}" for d in model.driver_names) or "no driver"
         raise LockUpError(
             f"lock-up at t = {t:.9g} s: with joint {joint} locked on its {side} stop the "
-            f"constraints of {', '.join(labels)} cannot all hold; the mechanism has no freedom "
+            f"constraints of {row_names(labels)} cannot all hold; the mechanism has no freedom "
             f"left for its drivers ({drivers}): the stop would have to stop a driver")
     p_locked = hs.params_of(target)
     q = project_positions(model, q, t, p_locked)  # clamp onto the stop

@@ -27,7 +27,7 @@ from . import events as ev
 from .equations import Buffered, Model
 from .errors import CmmError, SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
-from .kinematics import project_state, singular_ratio
+from .kinematics import project_state, row_names, singular_ratio
 from .result import Stats
 from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
 
@@ -422,7 +422,7 @@ class IdaIntegrator(Integrator):
         # (also a failure very near one, ahead or just past it: the policy tells which)
         if ratio < 0.2 * self.ratio0 or ratio < 0.01 or (
                 ratio < FALLING_RATIO and self._ratio_falls(q, tt, ratio)):
-            what = (f"dead point at t = {tt:.6g} s: the constraints of {', '.join(labels)} "
+            what = (f"dead point at t = {tt:.6g} s: the constraints of {row_names(labels)} "
                     f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                     "cannot follow its drivers through this position")
             status = Status.DEAD_POINT

@@ -136,6 +136,14 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     return float(s[-1] / s[0]) if s[0] > 0 else 0.0
 
 
+def row_names(labels: list[str], limit: int = 12) -> str:
+    """The constraint rows' labels for a message: all of them up to ``limit``, else the
+    first ones and how many more (A02 with 40 loops has 102 at its singular positions)."""
+    if len(labels) <= limit:
+        return ", ".join(labels)
+    return f"{', '.join(labels[:limit - 2])} and {len(labels) - limit + 2} more"
+
+
 def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
                    tol: float = 1e-6) -> tuple[list[str], float]:
     """Constraint rows that (nearly) depend on each other at q: the joints, drivers and

@@ -28,6 +28,7 @@ from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, S
 from .ida import IdaIntegrator
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .iterative import IterativeIntegrator
+from .kinematics import row_names
 from .mechanism import Mechanism, require_mechanism
 from .passage import passage_cut, watch_segment
 from .post import build_result
@@ -394,7 +395,7 @@ def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarr
         after[-1] = len(rec) - 1
         integ.after_singular(cr.t_after)
         return cr
-    note = (f"constraints of {', '.join(cr.labels)} dependent for an instant (rank drop "
+    note = (f"constraints of {row_names(cr.labels)} dependent for an instant (rank drop "
             f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
             f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
     joint = next((lab.split(" ", 1)[1] for lab in cr.labels if lab.startswith("joint ")), "")

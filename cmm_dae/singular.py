@@ -38,7 +38,7 @@ from scipy.optimize import minimize_scalar
 from .branches import choose_branch, other_branches
 from .equations import Model
 from .errors import SolverError, Status
-from .kinematics import dependent_rows, project_state
+from .kinematics import dependent_rows, project_state, row_names
 from .singular_instant import singular_instant
 
 #: Gauss-Legendre, two stages (order 4): nodes and coefficients.
@@ -262,7 +262,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
 
     def dead(why: str) -> SolverError:
         return SolverError(f"dead point at t = {t:.9g} s: the constraints of "
-                           f"{', '.join(labels) or 'the mechanism'} become dependent "
+                           f"{row_names(labels) or 'the mechanism'} become dependent "
                            f"(singular-value ratio {r0:.1e}) and {why}",
                            status=Status.DEAD_POINT)
 

@@ -52,6 +52,27 @@ def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
     assert res.drift[0] <= 1e-9
 
 
+def test_a02_n40_crosses_where_ida_gives_up_close_to_the_instant():
+    """A02 with 40 loops at the default rtol 1e-8: IDA fails so close to the first
+    singular instant that a crossing from there finds the velocities jumping (it stopped
+    with "dead point" at 0.7202 s); the crossing is tried again from the last sample well
+    before the instant and passes."""
+    n = 40
+    res = cd.run_dae(iftomm.a02_four_bar(n), 0.8)
+    assert res.status is cd.Status.SUCCESS and res.t[-1] == pytest.approx(0.8, abs=1e-12)
+    sing = [e for e in res.events if e.kind == "singular"]
+    assert len(sing) == 1 and f"rank drop {n}," in sing[0].note
+    # its dependent rows (about a hundred) named as the first ten and a count
+    assert re.search(r"constraints of (joint \w+, ){9}joint \w+ and \d+ more dependent",
+                     sing[0].note)
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
+    t_ref = quad(lambda p: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(p)))),
+                 0.0, math.pi / 2, epsabs=1e-14, epsrel=1e-13)[0]
+    assert abs(sing[0].t - t_ref) <= 2e-8  # measured 6.2e-9 s
+    err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(n, res.t)).T))
+    assert err <= 2e-7  # measured 5.8e-8 m
+
+
 def test_change_point_four_bar_is_driven_through_its_change_point(tmp_path):
     """s + l = p + q: at the change point all four links lie on one line; the driven
     crank goes on and the linkage follows on the branch of its motion."""
