@@ -9,6 +9,7 @@ the same driving effort (1e-9 N m) and prints the ratio of the medians::
     python validation/before_after.py                       # against version 1 (1d28c89)
     python validation/before_after.py --before HEAD~3 --model models/nipper_swing.toml
     python validation/before_after.py --before 695645f --compiled   # the speed work
+    python validation/before_after.py --before 8e35cf9 --model a02:10 --t-end 2
 
 With ``--compiled`` the working tree is also timed with ``compiled=True`` (the C segment,
 built once into a temporary cache before the timed runs), as a third column. ``--floor``
@@ -41,7 +42,11 @@ JOB = r"""
 import json, sys, time, gc
 import numpy as np
 import cmm_dae as cd
-mech = cd.load(sys.argv[1])
+if sys.argv[1].startswith("a02:"):  # IFToMM A02 with N loops, from the builder
+    from cmm_dae import iftomm
+    mech = iftomm.a02_four_bar(int(sys.argv[1][4:]))
+else:
+    mech = cd.load(sys.argv[1])
 t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 kw = {"compiled": True} if sys.argv[5] == "1" else {}
 method = sys.argv[6] if len(sys.argv) > 6 else "ida"
@@ -115,7 +120,7 @@ print(json.dumps({"counts": counts, "per_call": (with_fn - none) / calls[0]}))
 """
 
 
-def floor_job(model: Path, t_end: float, rtol: float, repeat: int) -> dict:
+def floor_job(model: Path | str, t_end: float, rtol: float, repeat: int) -> dict:
     """Callback counts of the working tree's default path and scikit-sundae's cost per
     Python callback (s), in a fresh subprocess."""
     out = subprocess.run([sys.executable, "-c", FLOOR_JOB, str(model), str(t_end), str(rtol),
@@ -134,7 +139,7 @@ def unpack(rev: str, where: Path) -> Path:
     return where
 
 
-def job(pythonpath: Path, model: Path, t_end: float, rtol: float, repeat: int,
+def job(pythonpath: Path, model: Path | str, t_end: float, rtol: float, repeat: int,
         compiled: bool = False, cache: str = "", method: str = "ida") -> dict:
     """One subprocess timing ``repeat`` warm runs of the package at ``pythonpath``
     (``method="iterative"`` runs the iterative algorithm with dt = ``rtol``)."""
@@ -166,7 +171,8 @@ def differences(b: dict, n: dict) -> tuple[bool, float, float]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", default=VERSION_1, help=f"git revision (default {VERSION_1})")
-    ap.add_argument("--model", default=str(ROOT / "models" / "double_folded.toml"))
+    ap.add_argument("--model", default=str(ROOT / "models" / "double_folded.toml"),
+                    help="a model file, or a02:N for IFToMM A02 with N loops (the builder)")
     ap.add_argument("--t-end", type=float, default=10.0)
     ap.add_argument("--rtol", type=float, default=1e-8)
     ap.add_argument("--rounds", type=int, default=5, help="alternating subprocess pairs")
@@ -179,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.floor and not a.compiled:
         ap.error("--floor needs --compiled (the floor is built on the compiled time)")
-    model = Path(a.model).resolve()
+    model = a.model if a.model.startswith("a02:") else Path(a.model).resolve()
     names = ["before", "after"] + (["compiled"] if a.compiled else [])
     with tempfile.TemporaryDirectory() as tmp:
         old = unpack(a.before, Path(tmp))
@@ -198,8 +204,8 @@ def main(argv: list[str] | None = None) -> int:
             if a.floor:
                 floors.append(floor_job(model, a.t_end, a.rtol, a.repeat))
     med = {name: statistics.median(w) for name, w in walls.items()}
-    print(f"model {model.name}, t_end {a.t_end} s, rtol {a.rtol:g}; {a.rounds} alternating "
-          f"rounds, best of {a.repeat} warm runs each")
+    print(f"model {getattr(model, 'name', model)}, t_end {a.t_end} s, rtol {a.rtol:g}; "
+          f"{a.rounds} alternating rounds, best of {a.repeat} warm runs each")
     label = {"before": f"before ({a.before})", "after": "after (working tree)",
              "compiled": "after, compiled=True"}
     ok = True
