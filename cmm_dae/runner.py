@@ -11,31 +11,28 @@ end time or to the next trigger.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import math
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from . import events as ev
 from .assembly import redundant_base_rows, start_state
+from .crossing import cross_singular
 from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
 from .ida import IdaIntegrator
-from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
+from .integrator import Integrator, Recorder, RunOptions
 from .iterative import IterativeIntegrator
-from .kinematics import row_names
 from .mechanism import Mechanism, require_mechanism
 from .passage import passage_cut, watch_segment
 from .post import build_result
 from .progress import Bar
-from .result import Event, Result, Stats
-from .singular import Crossing, step_over
+from .result import Result, Stats
 from .structure import force_constraint_joints, labeller
 
 #: The integration methods, by name.
@@ -285,7 +282,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             elif end.reason == "singular" and not end.triggers and cls.method == "ida":
                 # where IDA gave up close to the instant, a crossing from its last state
                 # can start too near (the accelerations there are ruled by round-off): if
-                # it fails, it is tried again from the last sample well before (A02, N = 40)
+                # it fails or jumps, it is tried again from the last sample well before
                 retry = functools.partial(passage_cut, hs.model, hs.p, t, q, v, rec, n0, end)
             t, q, v = end.t, end.q, end.v
             if seg is not None:
@@ -310,7 +307,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 integ.after_events(done)
             if end.reason == "singular":
                 n_events = len(events)
-                cr = _cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
+                cr = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events
@@ -357,91 +354,6 @@ def _branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:
                                  f"-1) with a joint of the mechanism "
                                  f"({', '.join(mech.joints)}), got {branch!r}"))
     return str(branch[0]), int(branch[1])
-
-
-#: A crossing whose velocities jump by more than this times rtol (relative) is tried again
-#: from an earlier start: on A02 with 40 loops at rtol 1e-8, a crossing from where IDA gave
-#: up jumped 9.3e-6 and lost 0.024 J (tip 1.5e-4 m off after 2 s), from the earlier
-#: sample 6.5e-8 (3.6e-7 m); with one or ten loops no crossing at rtol 1e-8 or 1e-10
-#: jumped more than 1.3e-8.
-RETRY_JUMP = 100.0
-
-
-def _cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
-                    v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
-                    after: list[int],
-                    retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None
-                    ) -> Crossing:
-    """Cross the singular position ahead of (t, q, v): the crossing (with the state after
-    it), one sample there and a "singular" event at the singular instant. ``retry`` gives
-    (the samples to keep, an earlier state) to start again from if the crossing from
-    (t, q, v) finds a dead point or a velocity jump above :data:`RETRY_JUMP` times rtol."""
-    def cross(t: float, q: np.ndarray, v: np.ndarray) -> Crossing:
-        return step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
-                         atol=opts.atol)
-
-    first: Crossing | None = None
-    try:
-        first = cross(t, q, v)
-    except SolverError as e:
-        if e.status != Status.DEAD_POINT or retry is None:
-            raise
-        error = e
-    cr = first
-    if retry is not None and (first is None or first.velocity_jump > RETRY_JUMP * opts.rtol):
-        # from where IDA gave up the crossing saw the velocities jump (round-off rules
-        # the accelerations that close to the instant): again from well before, and the
-        # one that jumped less is kept
-        cut = retry()
-        second = None
-        if cut is not None and cut[1].t < t:
-            with contextlib.suppress(SolverError):  # the first stands, or its error
-                second = cross(cut[1].t, cut[1].q, cut[1].v)
-        if second is not None and (first is None or second.velocity_jump < first.velocity_jump):
-            cr = second
-            rec.truncate(cut[0])  # the samples IDA took beyond the new start
-    if cr is None:
-        raise error
-    cfg = hs.current()
-    # the output grid inside the crossing's window, from its own steps (a window can be
-    # 0.3 s long where the integrator gave up early, at tight tolerances)
-    inside = [(x, *cr.state_at(hs.model, hs.p, x))
-              for x in integ.output_times(cr.t0, cr.t_after)]
-    if events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
-        # the integrator could not restart where the last crossing ended: the same
-        # crossing, taken further out (one event, its sample moved)
-        for x, qx, vx in inside:
-            rec.add(x, qx, vx, cfg)
-        rec.add(cr.t_after, cr.q, cr.v, cfg)
-        after[-1] = len(rec) - 1
-        integ.after_singular(cr.t_after)
-        return cr
-    note = (f"constraints of {row_names(cr.labels)} dependent for an instant (rank drop "
-            f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
-            f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
-    joint = next((lab.split(" ", 1)[1] for lab in cr.labels if lab.startswith("joint ")), "")
-    side = "continue" if opts.branch is None else (
-        f"{'switch' if cr.switched else 'continue'} ({opts.branch[0]} "
-        f"{'+' if opts.branch[1] > 0 else '-'})")
-    if cr.switched:
-        note = note.replace("crossed on the branch of the motion", "crossed onto the branch "
-                            f"on which joint {opts.branch[0]} moves "
-                            f"{'forwards' if opts.branch[1] > 0 else 'backwards'}")
-    events.append(Event(cr.t_singular, "singular", joint, side, cfg, cfg,
-                        float(np.linalg.norm(v)), float(np.linalg.norm(cr.v)), {},
-                        # nothing is lost at a crossing (the velocities are continuous);
-                        # the kinetic energy changes across its window by the work of the
-                        # forces, which the energy audit books from the samples
-                        0.0, 0.0, "", note))
-    for x, qx, vx in inside:
-        rec.add(x, qx, vx, cfg)
-    rec.add(cr.t_after, cr.q, cr.v, cfg)
-    after.append(len(rec) - 1)
-    integ.after_singular(cr.t_after)
-    if len(events) > opts.max_events:
-        raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
-                          "a singular position)", status=Status.MAX_EVENTS)
-    return cr
 
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8,
