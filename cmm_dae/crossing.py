@@ -28,11 +28,13 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
                    v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
                    after: list[int],
                    retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None
-                   ) -> Crossing:
+                   ) -> tuple[Crossing, int | None]:
     """Cross the singular position ahead of (t, q, v): the crossing (with the state after
     it), one sample there and a "singular" event at the singular instant. ``retry`` gives
     (the samples to keep, an earlier state) to start again from if the crossing from
-    (t, q, v) finds a dead point or a velocity jump above :data:`RETRY_JUMP` times rtol."""
+    (t, q, v) finds a dead point or a velocity jump above :data:`RETRY_JUMP` times rtol.
+    Returns the crossing and, where it started from that earlier state, the number of
+    samples kept before it (the segment now ends there), else None."""
     def cross(t: float, q: np.ndarray, v: np.ndarray) -> Crossing:
         return step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
                          atol=opts.atol)
@@ -44,7 +46,7 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
         if e.status != Status.DEAD_POINT or retry is None:
             raise
         error = e
-    cr = first
+    cr, kept = first, None
     if retry is not None and (first is None or first.velocity_jump > RETRY_JUMP * opts.rtol):
         # from where IDA gave up the crossing saw the velocities jump (round-off rules
         # the accelerations that close to the instant): again from well before, and the
@@ -55,8 +57,8 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
             with contextlib.suppress(SolverError):  # the first stands, or its error
                 second = cross(cut[1].t, cut[1].q, cut[1].v)
         if second is not None and (first is None or second.velocity_jump < first.velocity_jump):
-            cr = second
-            rec.truncate(cut[0])  # the samples IDA took beyond the new start
+            cr, kept = second, cut[0]
+            rec.truncate(kept)  # the samples IDA took beyond the new start
     if cr is None:
         raise error
     cfg = hs.current()
@@ -72,7 +74,7 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
         rec.add(cr.t_after, cr.q, cr.v, cfg)
         after[-1] = len(rec) - 1
         integ.after_singular(cr.t_after)
-        return cr
+        return cr, kept
     note = (f"constraints of {row_names(cr.labels)} dependent for an instant (rank drop "
             f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
             f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
@@ -98,4 +100,4 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     if len(events) > opts.max_events:
         raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
                           "a singular position)", status=Status.MAX_EVENTS)
-    return cr
+    return cr, kept

@@ -307,10 +307,12 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 integ.after_events(done)
             if end.reason == "singular":
                 n_events = len(events)
-                cr = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
+                cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events
+                    if kept is not None:  # crossed from an earlier sample: the segment,
+                        seg.n1, seg.t1 = kept, cr.t0  # as the sensitivities replay it, ends there
                 if t >= opts.t_end * (1.0 - 1e-12):
                     break
                 continue
