@@ -12,7 +12,8 @@ import numpy as np
 from . import events as ev
 from .errors import SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
-from .kinematics import row_names
+from .kinematics import dependent_rows, row_names, singular_ratio
+from .passage import stepped_over
 from .result import Event
 from .singular import Crossing, step_over
 
@@ -27,12 +28,13 @@ RETRY_JUMP = 100.0
 def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarray,
                    v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
                    after: list[int],
-                   retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None
-                   ) -> tuple[Crossing, int | None]:
+                   retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None,
+                   stalled: bool = False) -> tuple[Crossing, int | None]:
     """Cross the singular position ahead of (t, q, v): the crossing (with the state after
     it), one sample there and a "singular" event at the singular instant. ``retry`` gives
     (the samples to keep, an earlier state) to start again from if the crossing from
     (t, q, v) finds a dead point or a velocity jump above :data:`RETRY_JUMP` times rtol.
+    ``stalled``: the segment that ended here recorded no sample (IDA could not restart).
     Returns the crossing and, where it started from that earlier state, the number of
     samples kept before it (the segment now ends there), else None."""
     def cross(t: float, q: np.ndarray, v: np.ndarray) -> Crossing:
@@ -66,7 +68,7 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     # 0.3 s long where the integrator gave up early, at tight tolerances)
     inside = [(x, *cr.state_at(hs.model, hs.p, x))
               for x in integ.output_times(cr.t0, cr.t_after)]
-    if events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
+    if stalled and events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
         # the integrator could not restart where the last crossing ended: the same
         # crossing, taken further out (one event, its sample moved)
         for x, qx, vx in inside:
@@ -75,23 +77,17 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
         after[-1] = len(rec) - 1
         integ.after_singular(cr.t_after)
         return cr, kept
-    note = (f"constraints of {row_names(cr.labels)} dependent for an instant (rank drop "
-            f"{cr.rank_drop}, singular-value ratio down to {cr.ratio_min:.1e}); crossed on "
-            f"the branch of the motion, velocities continuous to {cr.velocity_jump:.1e}")
-    joint = next((lab.split(" ", 1)[1] for lab in cr.labels if lab.startswith("joint ")), "")
+    how = ("crossed on the branch of the motion, velocities continuous to "
+           f"{cr.velocity_jump:.1e}")
     side = "continue" if opts.branch is None else (
         f"{'switch' if cr.switched else 'continue'} ({opts.branch[0]} "
         f"{'+' if opts.branch[1] > 0 else '-'})")
     if cr.switched:
-        note = note.replace("crossed on the branch of the motion", "crossed onto the branch "
-                            f"on which joint {opts.branch[0]} moves "
-                            f"{'forwards' if opts.branch[1] > 0 else 'backwards'}")
-    events.append(Event(cr.t_singular, "singular", joint, side, cfg, cfg,
-                        float(np.linalg.norm(v)), float(np.linalg.norm(cr.v)), {},
-                        # nothing is lost at a crossing (the velocities are continuous);
-                        # the kinetic energy changes across its window by the work of the
-                        # forces, which the energy audit books from the samples
-                        0.0, 0.0, "", note))
+        how = (f"crossed onto the branch on which joint {opts.branch[0]} moves "
+               f"{'forwards' if opts.branch[1] > 0 else 'backwards'}, velocities continuous "
+               f"to {cr.velocity_jump:.1e}")
+    events.append(_event(cr.t_singular, cr.labels, cr.rank_drop, cr.ratio_min, how, side,
+                         cfg, float(np.linalg.norm(v)), float(np.linalg.norm(cr.v))))
     for x, qx, vx in inside:
         rec.add(x, qx, vx, cfg)
     rec.add(cr.t_after, cr.q, cr.v, cfg)
@@ -101,3 +97,48 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
         raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
                           "a singular position)", status=Status.MAX_EVENTS)
     return cr, kept
+
+
+def _event(t: float, labels: list[str], drop: int, ratio: float, how: str, side: str,
+           cfg: int, speed_before: float, speed_after: float) -> Event:
+    """The "singular" event of a singular position passed at t (s)."""
+    joint = next((lab.split(" ", 1)[1] for lab in labels if lab.startswith("joint ")), "")
+    note = (f"constraints of {row_names(labels)} dependent for an instant (rank drop {drop}, "
+            f"singular-value ratio down to {ratio:.1e}); {how}")
+    # nothing is lost at a singular position (the velocities are continuous); the kinetic
+    # energy changes across a crossing's window by the work of the forces, which the
+    # energy audit books from the samples
+    return Event(t, "singular", joint, side, cfg, cfg, speed_before, speed_after, {}, 0.0,
+                 0.0, "", note)
+
+
+def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
+                     opts: RunOptions, rec: Recorder, n0: int, end: SegmentEnd,
+                     events: list[Event], after: list[int]) -> list[tuple[float, int]]:
+    """Under ``branch = "continue"``: a "singular" event for every singular position IDA
+    integrated through inside the segment from (t, q, v) (:func:`passage.stepped_over`),
+    at the instant where the samples' interpolant has the smallest singular-value ratio,
+    its state after it being the first sample after that instant. Returns (instant, index
+    of that sample) for each."""
+    model, p, cfg = hs.model, hs.p, hs.current()
+    logged = []
+    for ps, k, q_s, v_s in stepped_over(model, p, t, q, v, rec, n0, end):
+        labels, _ = dependent_rows(model, q_s, ps.t, p, tol=1.0)
+        J = model.constraints(q_s, ps.t, p).Phi_q[model.active_rows(p)]
+        s = np.linalg.svd(J, compute_uv=False)
+        # the singular values that collapse at the instant, against the ratio at the
+        # sample the passage's search started from
+        r0 = singular_ratio(model, q if ps.start == 0 else rec.since(n0)[1][ps.start - 1],
+                            ps.t, p)
+        drop = max(int(np.sum(s < 0.1 * r0 * s[0])), 1) if s.size else 1
+        speed = float(np.linalg.norm(v_s))
+        events.append(_event(ps.t, labels, drop, ps.ratio, "IDA integrated through it "
+                             "within its error test (found afterwards in its samples, the "
+                             "instant on their cubic interpolant)", "continue", cfg, speed,
+                             speed))
+        after.append(k)
+        logged.append((ps.t, k))
+        if len(events) > opts.max_events:
+            raise SolverError(f"max_events = {opts.max_events} reached at t = {ps.t:.9g} s "
+                              "(last: a singular position)", status=Status.MAX_EVENTS)
+    return logged

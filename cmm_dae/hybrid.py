@@ -102,6 +102,9 @@ class SegmentTrace:
     relaxed: bool = False
     #: the factor on the multipliers' absolute tolerances (the run's force scale)
     lambda_scale: float = 1.0
+    #: the singular positions IDA integrated through inside the segment, logged as
+    #: events: (instant in s, index of the first sample after it)
+    passages: list[tuple[float, int]] = field(default_factory=list)
 
 
 def _key(locked: Locked) -> tuple:

@@ -67,7 +67,8 @@ class Event:
         ``"lock"`` (locked without impact), ``"release"``, ``"zone"`` (a load's zone
         entered or left), ``"stick"`` and ``"slip"`` (dry friction; ``side`` "stick",
         "positive" or "negative", the force at the switch in ``release_force``),
-        ``"singular"`` (a singular position crossed on the branch of the motion).
+        ``"singular"`` (a singular position passed: crossed on the branch of the motion or
+        onto the branch a rule asks for, or integrated through by IDA, as its note says).
     joint : str
         The metamorphic joint (for a zone: the joint whose coordinate defines it).
     side : str

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import events as ev
 from .assembly import redundant_base_rows, start_state
-from .crossing import cross_singular
+from .crossing import cross_singular, log_stepped_over
 from .equations import Model
 from .equilibrium import solve_equilibrium
 from .errors import AssemblyError, CmmError, ModelError, Problem, SolverError, Status
@@ -277,13 +277,20 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
             retry = None
+            stalled = len(rec) == n0
             if opts.branch is not None and cls.method == "ida":
                 end = watch_segment(hs.model, hs.p, t, q, v, rec, n0, end)
-            elif end.reason == "singular" and not end.triggers and cls.method == "ida":
-                # where IDA gave up close to the instant, a crossing from its last state
-                # can start too near (the accelerations there are ruled by round-off): if
-                # it fails or jumps, it is tried again from the last sample well before
-                retry = functools.partial(passage_cut, hs.model, hs.p, t, q, v, rec, n0, end)
+            elif cls.method == "ida":
+                passed = log_stepped_over(hs, t, q, v, opts, rec, n0, end, events, after)
+                if seg is not None:
+                    seg.passages = passed
+                if end.reason == "singular" and not end.triggers:
+                    # where IDA gave up close to the instant, a crossing from its last
+                    # state can start too near (the accelerations there are ruled by
+                    # round-off): if it fails or jumps, it is tried again from the last
+                    # sample well before
+                    retry = functools.partial(passage_cut, hs.model, hs.p, t, q, v, rec, n0,
+                                              end, last=True)
             t, q, v = end.t, end.q, end.v
             if seg is not None:
                 seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
@@ -307,7 +314,8 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 integ.after_events(done)
             if end.reason == "singular":
                 n_events = len(events)
-                cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry)
+                cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry,
+                                          stalled)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events

@@ -267,6 +267,8 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
         sp.dP[0], sp.params[0] = sp.dp_of(first.p), first.p
     for seg in trace[1:]:
         q, v, sq, sv = sp.segment(seg, sq, sv)
+        for t_s, k in seg.passages:  # IDA integrated through these inside the segment
+            sp.tau.append(sp.passage_tau(seg.p, t_s, k))
         q, v, sq, sv, n = sp.events(seg, q, v, sq, sv, seg.n1)
         if seg.crossing is not None:
             q, v, sq, sv = sp.crossing(seg, sq, sv, n)

@@ -47,6 +47,16 @@ class CrossingPass:
         self.sq[n], self.sv[n], self.dP[n], self.params[n] = sq, sv, dP, p
         return q, v, sq, sv
 
+    def passage_tau(self, p, t_s: float, k: int) -> np.ndarray:
+        """d t_singular / d theta of a singular position IDA integrated through between
+        samples ``k - 1`` and ``k`` (after the segment holding them has been integrated):
+        as for a crossing, with the state and its sensitivities interpolated between
+        those two samples."""
+        d = self.res.data
+        ends = [(float(self.res.t[i]), d["q"][i], d["v"][i], self.sq[i], self.sv[i])
+                for i in (k - 1, k)]
+        return self._singular_tau(p, self.dp_of(p), ends, t_s)
+
     def _singular_tau(self, p, dP, ends: list, t_s: float) -> np.ndarray:
         """d t_singular / d theta: the root of the signed smallest singular value
         ``w . (Phi_q n)`` with its singular vectors held fixed, the state and its

@@ -282,9 +282,13 @@ def test_branch_rule_with_several_loops_singular_at_once():
 
 def test_a02_runs_its_20_seconds_at_the_default_tolerances():
     """At rtol 1e-8 IDA steps over some singular positions itself and fails just before
-    or just past others; all are crossed."""
+    or just past others; all are crossed, and all are logged (17 of the 21 were, those
+    IDA integrated through were not)."""
     res = cd.run_dae(cd.load(cd.example("iftomm_a02_four_bar_N1")), 20.0)
-    assert res.success and len([e for e in res.events if e.kind == "singular"]) >= 5
+    sing = [e for e in res.events if e.kind == "singular"]
+    # the crank passes the horizontal 21 times in 20 s (the one-DOF reference)
+    assert res.success and len(sing) == 21
+    assert sum("integrated through" in e.note for e in sing) == 4
     # each crossing keeps the energy: over 0.12 s around it the total moves by at most
     # 4.7e-6 J (of 30.8 J); the IDA segments between crossings drift 2.4e-5..5.9e-5 J
     e = res.energy()
@@ -297,3 +301,37 @@ def test_a02_runs_its_20_seconds_at_the_default_tolerances():
     # into phase over 20 s); 2.1e-6 m at rtol 1e-10
     err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(1, res.t)).T))
     assert err <= 1e-3
+
+
+@pytest.mark.parametrize("n", [1, 10])
+def test_singular_positions_ida_integrates_through_are_logged(n):
+    """At rtol 1e-6 IDA steps over the singular positions without failing (over 3 s all
+    three with N = 1, two of three with N = 10). Each is logged where it happens: the
+    instant against the crank's own horizontal position in the Result (a root of sin(phi)
+    on the cubic Hermite interpolant of its samples: geometry, not the singular values)
+    and, for the first, against the branch's energy quadrature within the run's own
+    phase error at this rtol; the rank drop is the number of loops."""
+    from scipy.interpolate import CubicHermiteSpline
+    from scipy.optimize import brentq
+
+    res = cd.run_dae(iftomm.a02_four_bar(n), 3.0, rtol=1e-6)
+    sing = [e for e in res.events if e.kind == "singular"]
+    assert len(sing) == 3  # 0.708, 1.215, 2.632 s (N = 1)
+    assert sum("integrated through" in e.note for e in sing) == (3 if n == 1 else 2)
+    assert all(f"rank drop {n}," in e.note and e.side == "continue" for e in sing)
+    keep = np.r_[True, np.diff(res.t) > 0.0]
+    t = res.t[keep]
+    phi, w = res.body("crank0").pose[keep, 2], res.body("crank0").velocity[keep, 2]
+    crank = CubicHermiteSpline(t, np.sin(phi), np.cos(phi) * w)
+    for e in sing:
+        k = int(np.searchsorted(t, e.t))
+        t_geo = brentq(crank, t[k - 1], t[k], xtol=1e-14)
+        assert abs(e.t - t_geo) <= 5e-8  # measured 2.5e-9, 9.0e-9, 3.5e-9 s (N = 1)
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
+    t_ref = quad(lambda p: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(p)))),
+                 0.0, math.pi / 2, epsabs=1e-14, epsrel=1e-13)[0]
+    assert abs(sing[0].t - t_ref) <= 1e-6  # the run's phase error at rtol 1e-6
+    # the sample of an event IDA integrated through is the first after its instant
+    ks = res.data["event_sample"]
+    silent = [(e, k) for e, k in zip(sing, ks, strict=True) if "through" in e.note]
+    assert all(res.t[k - 1] <= e.t < res.t[k] for e, k in silent)
