@@ -197,15 +197,6 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     return sorted(found, key=lambda ps: ps.t)
 
 
-def missed_passage(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-                   v: np.ndarray) -> int | None:
-    """The sample to cross the first passage of :func:`passages` from (the last before it
-    with a singular-value ratio of at least :data:`START_RATIO` where there is one), or
-    None when the samples pass no singular position."""
-    found = passages(model, p, t, q, v, first=True, ends_open=True)
-    return found[0].start if found else None
-
-
 def _samples(t: float, q: np.ndarray, v: np.ndarray, rec: Recorder, n0: int,
              end: SegmentEnd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A segment's samples, its start first and its end last (neither is in ``rec``
@@ -256,13 +247,14 @@ def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndar
 
 def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
                  rec: Recorder, n0: int, end: SegmentEnd
-                 ) -> list[tuple[Passage, int, np.ndarray, np.ndarray]]:
+                 ) -> list[tuple[Passage, int, np.ndarray, np.ndarray, float]]:
     """The singular positions IDA integrated through inside one segment, to be logged.
 
     Parameters are those of :func:`passage_cut`. Returns, in time order, each passage
-    with the index in ``rec`` of the first sample after it and the interpolated positions
-    and velocities at its instant. One in the segment's last interval is left out when
-    the segment ended at a singular position: the crossing from there takes it.
+    with the index in ``rec`` of the first sample after it, the interpolated positions
+    and velocities at its instant and the singular-value ratio at the sample its search
+    started from. One in the segment's last interval is left out when the segment ended
+    at a singular position: the crossing from there takes it.
     """
     ts, qs, vs = _samples(t, q, v, rec, n0, end)
     out = []
@@ -272,7 +264,8 @@ def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
             continue
         a = ps.interval
         qs_, vs_ = hermite(ts[a], qs[a], vs[a], ts[a + 1], qs[a + 1], vs[a + 1], ps.t)
-        out.append((ps, after, qs_, vs_))
+        j = ps.start
+        out.append((ps, after, qs_, vs_, singular_ratio(model, qs[j], float(ts[j]), p)))
     return out
 
 
