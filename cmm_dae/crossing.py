@@ -12,7 +12,7 @@ import numpy as np
 from . import events as ev
 from .errors import SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
-from .kinematics import dependent_rows, row_names
+from .kinematics import dependent_rows, rank_drop, row_names
 from .passage import stepped_over
 from .result import Event
 from .singular import Crossing, step_over
@@ -124,11 +124,8 @@ def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
     logged = []
     for ps, k, q_s, v_s, r0 in stepped_over(model, p, t, q, v, rec, n0, end):
         labels, _ = dependent_rows(model, q_s, ps.t, p, tol=1.0)
-        J = model.constraints(q_s, ps.t, p).Phi_q[model.active_rows(p)]
-        s = np.linalg.svd(J, compute_uv=False)
-        # the singular values that collapse at the instant, against the ratio r0 at the
-        # sample the passage's search started from
-        drop = max(int(np.sum(s < 0.1 * r0 * s[0])), 1) if s.size else 1
+        # against the ratio r0 at the sample the passage's search started from
+        drop = rank_drop(model, q_s, ps.t, p, r0)
         speed = float(np.linalg.norm(v_s))
         events.append(_event(ps.t, labels, drop, ps.ratio, "IDA integrated through it "
                              "within its error test (found afterwards in its samples, the "

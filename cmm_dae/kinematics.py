@@ -131,6 +131,15 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     return float(s[-1] / s[0]) if s[0] > 0 else 0.0
 
 
+def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -> int:
+    """How many singular values of the active rows' Jacobian have collapsed at q, the
+    singular instant, against ``r0``, the ratio where the approach to it was seen: those
+    below a tenth of ``r0`` times the largest (at least 1)."""
+    J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
+    s = np.linalg.svd(J, compute_uv=False)
+    return max(int(np.sum(s < 0.1 * r0 * s[0])), 1) if s.size else 1
+
+
 def row_names(labels: list[str], limit: int = 12) -> str:
     """The constraint rows' labels for a message: all of them up to ``limit``, else the
     first ones and how many more (A02 with 40 loops has 102 at its singular positions)."""

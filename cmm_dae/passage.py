@@ -142,7 +142,7 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
     found: list[Passage] = []
     searched: set[int] = set()
-    dips: list[int] = []
+    dips: set[int] = set()
     for i in candidates:
         # down the exact ratio to its own local minimum (next to the determinant's,
         # where the other singular values change fast)
@@ -152,9 +152,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             if r(k) >= r(i):
                 break
             i = k
-        if r(i) < WATCH_RATIO and i not in dips:
-            dips.append(i)
-    for i in sorted(set(dips)):
+        if r(i) < WATCH_RATIO:
+            dips.add(i)
+    for i in sorted(dips):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the

@@ -38,7 +38,7 @@ from scipy.optimize import minimize_scalar
 from .branches import choose_branch, other_branches
 from .equations import Model
 from .errors import SolverError, Status
-from .kinematics import dependent_rows, project_state, row_names
+from .kinematics import dependent_rows, project_state, rank_drop, row_names
 from .singular_instant import singular_instant
 
 #: Gauss-Legendre, two stages (order 4): nodes and coefficients.
@@ -382,10 +382,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     if jump > 1e-5 or dq > 1e-6 * scale or (tt < t_end and r1 < r0):
         raise dead(f"the motion cannot continue through it (velocity change "
                    f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
-    # the rank drop: the singular values that collapse at the singular instant
-    J = model.constraints(path(tau), t_s, p).Phi_q[model.active_rows(p)]
-    s = np.linalg.svd(J, compute_uv=False)
-    drop = int(np.sum(s < 0.1 * r0 * s[0])) if s.size else 0
+    drop = rank_drop(model, path(tau), t_s, p, r0)
     if not past:  # the instant along the Gauss steps, not the second-order path ahead
         t_s = singular_instant(model, p, ends, t_s)
     elif t_s > 0.0:  # behind the start: one Gauss step back twice as far brackets it
@@ -395,5 +392,5 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             t_s = singular_instant(model, p, [(back, qb, vb)] + ends, t_s)
         except np.linalg.LinAlgError:
             pass  # the extrapolated instant stands
-    return Crossing(t_s, tt, q1, v1, labels, max(drop, 1), r_min, jump, switched,
+    return Crossing(t_s, tt, q1, v1, labels, drop, r_min, jump, switched,
                     tuple(taken), nsub, tuple(ends))
