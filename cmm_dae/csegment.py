@@ -77,7 +77,8 @@ def driver() -> ctypes.CDLL:
         lib.cmm_seg_new.restype = _P
         lib.cmm_seg_new.argtypes = [
             ctypes.c_int, ctypes.c_int, ctypes.c_int, _P, _P, _P, _P, _P, _P, _P, _P, _D,
-            ctypes.c_double, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_long,
+            ctypes.c_double, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+            ctypes.c_long,
             ctypes.c_long, ctypes.c_int, _D, ctypes.c_int, ctypes.c_int, ctypes.c_int, _I, _I,
             ctypes.c_int]
         lib.cmm_seg_run.restype = ctypes.c_int
@@ -129,8 +130,8 @@ class CompiledModel:
         self.lib = driver()
         self.sparse = sparse
         # the Jacobian's nonzeros in CSC order, on CasADi's own pattern, whichever solver
-        res, jac = model.res_sx, model.jac_sparse_fn
-        colind, row = model.jac_pattern.get_ccs()
+        res, jac = model.ida.res_sx, model.ida.jac_sparse_fn
+        colind, row = model.ida.jac_pattern.get_ccs()
         self.colptr = np.asarray(colind, dtype=np.intc)
         self.rowind = np.asarray(row, dtype=np.intc)
         funcs = [res, jac]
@@ -159,8 +160,8 @@ class CompiledModel:
     def _exact(self, hs: ev.HybridState, triggers: list[ev.Trigger]) -> ca.Function:
         model = self.model
         nq, m = model.nq, model.m
-        t, y, p = ca.MX.sym("t"), ca.MX.sym("y", model.N), ca.MX.sym("p", model.n_params)
-        q, v = y[:nq], y[nq:2 * nq]
+        t, y, p = ca.MX.sym("t"), ca.MX.sym("y", model.ida.N), ca.MX.sym("p", model.n_params)
+        q, v, _ = model.ida.symbolic(y)
         lam = ca.solve(*model.kkt_system(q, v, t, p), "qr")[nq:nq + m]
         c, cd = model.cvel_fn(q, v)
         vals: list = [None] * len(triggers)
@@ -168,29 +169,30 @@ class CompiledModel:
         return ca.Function("cmm_evx", [t, y, p], [ca.vertcat(1.0, *vals)])
 
     def run(self, p: np.ndarray, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
-            atol: np.ndarray, rtol: float, first_step: float, max_steps: int, budget: int,
+            atol: np.ndarray, rtol: float, first_step: float, min_step: float,
+            max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None
             ) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`."""
         model, lib = self.model, self.lib
-        N, ne = model.N, 1 + n_triggers
+        N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
         D = ctypes.c_double
         # contiguous copies, locals of this call: alive while the C side points at them
         p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float)
                                        for a in (p, y0, yp0, atol, tspan[1:]))
         seg = lib.cmm_seg_new(
-            N, ne, 2 * model.nq, self.res[0], self.res[1], self.jac[0], self.jac[1],
+            N, ne, 2 * model.ida.nz, self.res[0], self.res[1], self.jac[0], self.jac[1],
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
-            D(rtol), D(first_step), max_steps, budget, int(relaxed), tout_.ctypes.data_as(_D),
-            tout_.size, int(tspan.size == 2), self.rowind.size,
+            D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed),
+            tout_.ctypes.data_as(_D), tout_.size, int(tspan.size == 2), self.rowind.size,
             self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse))
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
-        ncol = 2 * model.nq  # only q and v are recorded
+        ncol = 2 * model.ida.nz  # only IDA's coordinates and rates are recorded
         T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :ncol].copy()]
         info = np.zeros(ne, dtype=np.intc)
         stats = np.zeros(3, dtype=np.int_)

@@ -75,14 +75,15 @@ class IdaIntegrator(Integrator):
 
     def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
         super().__init__(model, hs, opts, stats)
-        nq = model.nq
+        #: IDA's unknowns (bodies pinned to the ground by their angle alone)
+        self.u = u = model.ida
         self.t_arr = np.zeros(1)
         self.cj_arr = np.zeros(1)
         self.p = np.zeros(model.n_params)
         # IDA's arrays are copied into these (bound once) rather than bound at every
         # callback: a copy costs a third of a bind
-        self.y_in, self.yp_in, self.res_out = (np.zeros(model.N) for _ in range(3))
-        self.res = Buffered(model.res_fn)
+        self.y_in, self.yp_in, self.res_out = (np.zeros(u.N) for _ in range(3))
+        self.res = Buffered(u.res_fn)
         for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.p)):
             self.res.bind(i, arr)
         self.res.bind_out(0, self.res_out)
@@ -91,16 +92,16 @@ class IdaIntegrator(Integrator):
         # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
         # derivatives outside it, so they keep the dense one
         self.sparse = not model.callables and (
-            opts.linsolver == "sparse" or (opts.linsolver == "auto" and model.N >= SPARSE_FROM))
+            opts.linsolver == "sparse" or (opts.linsolver == "auto" and u.N >= SPARSE_FROM))
         self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
         self.ls_options: dict = {}
         if self.sparse:
-            colind, row = model.jac_pattern.get_ccs()
+            colind, row = u.jac_pattern.get_ccs()
             self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
                 (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
-                shape=(model.N, model.N))}
-        self.atol = np.concatenate([np.full(2 * nq, opts.atol), np.full(model.m, ATOL_LAMBDA),
-                                    np.full(model.m, ATOL_MU)])
+                shape=(u.N, u.N))}
+        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol), np.full(u.m, ATOL_LAMBDA),
+                                    np.full(u.m, ATOL_MU)])
         #: factor on the multipliers' absolute tolerances, from the forces at the start
         #: (set by the first segment)
         self.lambda_scale = 1.0
@@ -129,8 +130,8 @@ class IdaIntegrator(Integrator):
 
     def _jacobian(self, t, y, yp, res, cj, JJ):
         if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
-            self.jac = (Buffered(self.model.jac_sparse_fn, sparse=True) if self.sparse
-                        else Buffered(self.model.jac_fn))
+            self.jac = (Buffered(self.u.jac_sparse_fn, sparse=True) if self.sparse
+                        else Buffered(self.u.jac_fn))
             for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.cj_arr, self.p)):
                 self.jac.bind(i, arr)
         self.t_arr[0] = t
@@ -171,8 +172,8 @@ class IdaIntegrator(Integrator):
             # it (or with the multipliers out of the test) the values come from a KKT solve,
             # so a root is located on the same function as always. The two agree to well
             # under the margin, so switching between them makes no sign change of its own.
-            nq = self.model.nq
-            self._exact_events(t, y[:nq], y[nq:2 * nq])
+            q, v = self.u.centroids(y[None, :])
+            self._exact_events(t, q[0], v[0])
         out[:] = self.ev_out
 
     def _event_function(self) -> Buffered:
@@ -185,10 +186,9 @@ class IdaIntegrator(Integrator):
         key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
         fn = self._ev_cache.get(key)
         if fn is None:
-            nq, m = model.nq, model.m
-            y = ca.SX.sym("y", model.N)
-            c, cd = model.cvel_fn(y[:nq], y[nq:2 * nq])
-            lam = y[2 * nq:2 * nq + m]
+            y = ca.SX.sym("y", self.u.N)
+            q, v, lam = self.u.symbolic(y)
+            c, cd = model.cvel_fn(q, v)
             vals: list = [None] * len(self.triggers)
             ev.event_values(hs, c, cd, lam, self.triggers, vals, where=ca.if_else)
             near = ca.SX(1.0)
@@ -238,12 +238,11 @@ class IdaIntegrator(Integrator):
         self._lambda_atol()
 
     def _lambda_atol(self) -> None:
-        nq, m = self.model.nq, self.model.m
-        self.atol[2 * nq:2 * nq + m] = lambda_atol(self.relaxed, self.lambda_scale)
+        nz, m = self.u.nz, self.u.m
+        self.atol[2 * nz:2 * nz + m] = lambda_atol(self.relaxed, self.lambda_scale)
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
-        model, opts, hs = self.model, self.opts, self.hs
-        nq = model.nq
+        model, opts, hs, u = self.model, self.opts, self.hs, self.u
         self.p[:] = hs.p
         if not self._scaled:  # the run's first segment: its force scale
             self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v), True
@@ -268,9 +267,15 @@ class IdaIntegrator(Integrator):
         q, v = project_state(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
         self.ratio0 = singular_ratio(model, q, t0, self.p)
-        y0 = np.concatenate([q, v, lam, np.zeros(model.m)])
-        yp0 = np.concatenate([v, a, np.zeros(2 * model.m)])
+        y0, yp0 = u.start(q, v, a, lam)
         ne = 1 + len(self.triggers)
+        # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
+        # failure next to a singular position halved its step down to 1e-17 s and then
+        # took a million such steps in place (A02 at rtol 1e-10). With this floor it fails
+        # there, and the failure is handled as any other.
+        self.min_step = 0.25 * np.finfo(float).eps * abs(t0)
+        if first_step:
+            first_step = max(first_step, 2.0 * self.min_step)
 
         # scikit-sundae keeps its event history on the function object: a fresh one per
         # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
@@ -316,7 +321,9 @@ class IdaIntegrator(Integrator):
             solver = None if self.c is not None else sun.ida.IDA(
                 resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
                 rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
-                first_step=first_step, algebraic_idx=list(range(2 * nq, model.N)),
+                first_step=first_step, min_step=self.min_step,
+                max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
+                algebraic_idx=list(range(2 * u.nz, u.N)),
                 **self.ls_options)
         t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
         outs = _output_times(opts, t0)
@@ -349,6 +356,14 @@ class IdaIntegrator(Integrator):
             # IDA cannot restart where a singular-position crossing ended: still too near
             # it; the policy takes the crossing further out
             return SegmentEnd(t0, q, v, (), "singular")
+        if r.status < 0 and self.error is None and T[-1] <= t0 and not first_step:
+            # IDA's own first step comes from y' and the tolerances alone: on Andrews'
+            # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
+            # (mass / h^2 beside the constraint rows) cannot be solved, and each failure
+            # only made it smaller. Again with a first step from the accelerations.
+            self.first_step = self._first_step(y0, yp0, t_stop - t0)
+            if self.first_step > 0.0:
+                return self.advance(t0, q, v, rec)
         if r.status < 0 and self.error is None and not self.relaxed and (
                 T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
             # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
@@ -362,8 +377,9 @@ class IdaIntegrator(Integrator):
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
         if self.error is not None:  # only what was computed before the failure
             keep = keep[T[keep] <= self.t_error]
-        rec.add_block(T[keep], Y[keep, :nq], Y[keep, nq:2 * nq], hs.current())
-        t1, q1, v1 = float(T[-1]), Y[-1, :nq].copy(), Y[-1, nq:2 * nq].copy()
+        Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
+        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current())
+        t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
         if self.error is not None:
             e = self.error
             raise SolverError(f"the integration failed after t = "
@@ -393,6 +409,14 @@ class IdaIntegrator(Integrator):
             return SegmentEnd(t1, q1, v1, (), "restart")
         return SegmentEnd(t1, q1, v1, (), "end")
 
+    def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
+        """A first step (s) whose order-1 local error in the coordinates, h^2 / 2 |z''|
+        in IDA's weighted norm, is the tolerance: z'' is known at a consistent start."""
+        nz = self.u.nz
+        wt = 1.0 / (self.opts.rtol * np.abs(y0[:nz]) + self.atol[:nz])
+        norm = float(np.sqrt(np.mean((yp0[nz:2 * nz] * wt) ** 2))) if nz else 0.0
+        return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0
+
     def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                         first_step: float) -> csegment.SegmentRun:
         """The segment in C: the same IDA options, residual, Jacobian and event functions
@@ -400,7 +424,7 @@ class IdaIntegrator(Integrator):
         fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
                                      self.has_push)
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.opts.rtol, first_step,
-                       self.opts.max_steps, self.step_budget, self.relaxed,
+                       self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress)
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted

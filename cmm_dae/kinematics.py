@@ -7,6 +7,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from .equations import Model
+from .unknowns import ground_pins
 
 # ------------------------------------------------------------------- geometry
 #: Rows from which :class:`MinNorm` factors by QR: measured side by side, ``lstsq`` took
@@ -176,7 +177,12 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
                    ) -> tuple[int, ...]:
     """Joint and driver rows that depend on the others at q (a redundant constraint set:
     a parallelogram with a third crank, say): indices into ``model.all_rows``, found by a
-    QR factorisation with column pivoting of the rows' Jacobian (transposed)."""
+    QR factorisation with column pivoting of the rows' Jacobian (transposed).
+
+    The rows of the joints that pin bodies to the ground are kept (they are independent
+    of each other: one joint per body): IDA integrates those bodies by their angle, which
+    needs both rows of the pin. The dependent rows are then picked among the others,
+    projected on what the pins leave free; their number is the whole set's rank deficit."""
     from scipy.linalg import qr
 
     A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
@@ -185,4 +191,13 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
     _, R, piv = qr(A.T, mode="economic", pivoting=True)
     d = np.abs(np.diag(R))
     rank = int(np.sum(d > tol * d[0])) if d.size and d[0] > 0 else 0
-    return tuple(sorted(int(i) for i in piv[rank:]))
+    pins = set(ground_pins(model.mech).values())
+    keep = [i for i, r in enumerate(model.all_rows[:model.n_base])
+            if r.kind == "joint" and r.name in pins]
+    if rank == A.shape[0] or not keep or rank < len(keep):
+        return tuple(sorted(int(i) for i in piv[rank:]))
+    rest = np.array([i for i in range(A.shape[0]) if i not in set(keep)], dtype=int)
+    Qk, _ = np.linalg.qr(A[keep].T)  # an orthonormal basis of the pins' rows
+    B = A[rest] - (A[rest] @ Qk) @ Qk.T
+    _, _, piv_r = qr(B.T, mode="economic", pivoting=True)
+    return tuple(sorted(int(i) for i in rest[piv_r[rank - len(keep):]]))

@@ -215,7 +215,8 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  cafun res, cawork res_w, cafun jac, cawork jac_w,
                  cafun ev, cawork ev_w, cafun evx, cawork evx_w, double *p,
                  double t0, const double *y0, const double *yp0, const double *atol,
-                 double rtol, double first_step, long max_steps, long budget, int relaxed,
+                 double rtol, double first_step, double min_step, long max_steps,
+                 long budget, int relaxed,
                  const double *tout, int nout, int onestep,
                  int nnz, const int *colptr, const int *rowind, int sparse) {
     Seg *s = calloc(1, sizeof(Seg));
@@ -280,7 +281,7 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     }
     ok = ok && IDASetId(s->mem, s->id) == 0;
     ok = ok && IDASetInitStep(s->mem, first_step) == 0;
-    ok = ok && IDASetMinStep(s->mem, 0.0) == 0;
+    ok = ok && IDASetMinStep(s->mem, min_step) == 0;
     ok = ok && IDASetMaxStep(s->mem, 0.0) == 0;
     ok = ok && IDASetMaxOrd(s->mem, 5) == 0;
     ok = ok && IDASetMaxNumSteps(s->mem, max_steps) == 0;

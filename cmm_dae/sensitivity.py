@@ -234,10 +234,10 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
             raise ModelError([Problem("sensitivities", x, "is solved by the [initial] "
                                       "equilibrium, not a free parameter") for x in clash],
                              mech.source)
-    model = Model(mech, theta=paths + solved)
+    model = Model(mech, theta=paths + solved, pinned_angles=False)
     drop = redundant_base_rows(model) if model.m else ()
     if drop:  # as the run leaves them out (the pass must follow the same equations)
-        model = Model(mech, theta=paths + solved, drop=drop)
+        model = Model(mech, theta=paths + solved, drop=drop, pinned_angles=False)
     why = _unsupported(mech, model)
     if why is not None:
         raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),

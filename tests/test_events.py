@@ -54,7 +54,9 @@ def bouncing_model(tmp_path: Path, e: float) -> cd.Mechanism:
 
 def test_fall_onto_stop_plastic():
     mech = cd.load(MODELS / "pendulum_stop.toml")
-    res = cd.run_dae(mech, 2.0, rtol=1e-10, atol=1e-12, output_dt=0.01)
+    # rtol 1e-11: the velocity at the stop is IDA's global error (1.6e-8 rad/s at 1e-10
+    # on the pendulum's angle alone, 166 steps; 6.2e-10 at 1e-11, 238 steps)
+    res = cd.run_dae(mech, 2.0, rtol=1e-11, atol=1e-13, output_dt=0.01)
     assert [(e.kind, e.joint, e.side) for e in res.events] == [("limit", "O", "lower")]
     ev = res.events[0]
     t_ref = fall_time(TH0, THS)
