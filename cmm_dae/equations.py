@@ -78,6 +78,19 @@ class Row:
 class Model:
     """Symbolic model of a mechanism and its compiled CasADi functions.
 
+    Parameters
+    ----------
+    mech : Mechanism
+    compiled : bool
+        Compile the residual and its Jacobian to C (CasADi code generation).
+    drop : tuple of int
+        Redundant joint and driver rows to leave out (indices into ``all_rows``).
+    theta : sequence of str
+        Model parameters kept as symbols (sensitivities).
+    pinned_angles : bool
+        Let IDA carry a body pinned to the ground by an undriven revolute joint by its
+        angle alone (:attr:`ida`); False keeps every body in centroid coordinates.
+
     Attributes
     ----------
     nq : int
