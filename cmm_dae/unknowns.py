@@ -24,15 +24,12 @@ the eliminated joints come, like all reactions, from the KKT solve of post-proce
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from .mechanism import GROUND, Mechanism
-
-if TYPE_CHECKING:
-    from .equations import Model
 
 
 def ground_pins(mech: Mechanism) -> dict[str, str]:
@@ -66,8 +63,10 @@ class Unknowns:
         IDA's number of unknowns, ``2 nz + 2 m``.
     """
 
-    def __init__(self, model: Model, pinned: dict[str, str], q, v, t, p, phi, Qf, free,
+    def __init__(self, model: Any, pinned: dict[str, str], q, v, t, p, phi, Qf, free,
                  Mdiag):
+        # model: the :class:`~cmm_dae.equations.Model` being built (not imported here:
+        # this module sits below it)
         self.model = model
         self.pinned = dict(pinned)
         nq = model.nq
