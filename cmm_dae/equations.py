@@ -384,13 +384,11 @@ class Model:
         #: the symbolic residual (``res_fn`` may be replaced by a compiled one below), which
         #: :mod:`cmm_dae.csegment` generates C from with ``jac_sparse_fn``
         self.res_sx = self.res_fn
-        # IDA's unknowns: a body pinned to the ground by its angle alone. Not with load laws
-        # given as Python callables (their solver Jacobian terms are in centroid
-        # coordinates), nor for a pin with a driver: its angle is prescribed, so there is
-        # nothing to gain, and the double-folded cycle's driven crank by its angle took
-        # 9% more steps at rtol 1e-8 and stalled (1e-6 s steps) at 1e-12.
+        # IDA's unknowns: a body pinned to the ground by its angle alone (not with load laws
+        # given as Python callables, whose solver Jacobian terms are in centroid
+        # coordinates)
         pins = {b: j for b, j in ground_pins(mech).items()
-                if pinned_angles and not self.callables and j not in mech.drivers
+                if pinned_angles and not self.callables
                 and sum(r == Row("joint", j) for r in self.rows) == 2}
         #: what IDA integrates (:class:`~cmm_dae.unknowns.Unknowns`)
         self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)

@@ -33,11 +33,15 @@ from .mechanism import GROUND, Mechanism
 
 
 def ground_pins(mech: Mechanism) -> dict[str, str]:
-    """The bodies a revolute joint pins to the ground: {body: joint}, the first such joint
-    of each body (model order)."""
+    """The bodies a revolute joint without a driver pins to the ground: {body: joint}, the
+    first such joint of each body (model order). A driven pin is left out: its angle is
+    prescribed, so carrying its body by it gains nothing, and the double-folded cycle's
+    driven crank by its angle took 9% more steps at rtol 1e-8 and stalled (1e-6 s steps)
+    at 1e-12."""
     pins: dict[str, str] = {}
     for name, j in mech.joints.items():
-        if j.type != "revolute" or (j.first_body == GROUND) == (j.second_body == GROUND):
+        if j.type != "revolute" or (j.first_body == GROUND) == (j.second_body == GROUND) \
+                or name in mech.drivers:
             continue
         body = j.second_body if j.first_body == GROUND else j.first_body
         pins.setdefault(body, name)
@@ -80,9 +84,9 @@ class Unknowns:
             self._full = None
             return
         mech = model.mech
-        gone = {k for k, r in enumerate(model.rows)
-                if r.kind == "joint" and r.name in set(pinned.values())}
-        self.rows = np.array([k for k in range(model.m) if k not in gone], dtype=int)
+        joints = set(pinned.values())
+        self.rows = np.array([k for k, r in enumerate(model.rows)
+                              if not (r.kind == "joint" and r.name in joints)], dtype=int)
         sel = []
         for i, b in enumerate(model.body_names):
             sel += [3 * i + 2] if b in pinned else [3 * i, 3 * i + 1, 3 * i + 2]
@@ -177,15 +181,9 @@ class Unknowns:
             return y[:nq], y[nq:2 * nq], y[2 * nq:2 * nq + m]
         qv = self._full(y[:2 * nz])
         nq = self.model.nq
-        lam_r = y[2 * nz:2 * nz + m]
-        parts = []
-        rows = set(self.rows.tolist())
-        k = 0
-        for i in range(self.model.m):
-            if i in rows:
-                parts.append(lam_r[k])
-                k += 1
-            else:
-                parts.append(ca.DM(0.0) if isinstance(y, ca.MX) else ca.SX(0.0))
-        lam = ca.vertcat(*parts) if parts else y[0:0]
+        # every row's multiplier: IDA's rows' scattered by a constant selection matrix
+        S = ca.DM(self.model.m, m)
+        for k, i in enumerate(self.rows.tolist()):
+            S[i, k] = 1.0
+        lam = ca.mtimes(S, y[2 * nz:2 * nz + m])
         return qv[:nq], qv[nq:], lam
