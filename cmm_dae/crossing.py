@@ -5,6 +5,7 @@ and its ``"singular"`` event in the log."""
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -29,17 +30,19 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
                    v: np.ndarray, opts: RunOptions, rec: Recorder, events: list[Event],
                    after: list[int],
                    retry: Callable[[], tuple[int, SegmentEnd] | None] | None = None,
-                   stalled: bool = False) -> tuple[Crossing, int | None]:
+                   stalled: bool = False, t_min: float = -math.inf
+                   ) -> tuple[Crossing, int | None]:
     """Cross the singular position ahead of (t, q, v): the crossing (with the state after
     it), one sample there and a "singular" event at the singular instant. ``retry`` gives
     (the samples to keep, an earlier state) to start again from if the crossing from
     (t, q, v) finds a dead point or a velocity jump above :data:`RETRY_JUMP` times rtol.
     ``stalled``: the segment that ended here recorded no sample (IDA could not restart).
+    ``t_min``: that segment's start (s); an instant IDA stepped across lies after it.
     Returns the crossing and, where it started from that earlier state, the number of
     samples kept before it (the segment now ends there), else None."""
     def cross(t: float, q: np.ndarray, v: np.ndarray) -> Crossing:
         return step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
-                         atol=opts.atol)
+                         atol=opts.atol, t_min=t_min)
 
     first: Crossing | None = None
     try:

@@ -273,7 +273,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
             seg = None if trace is None else ev.SegmentTrace(
                 t, q.copy(), v.copy(), hs.p.copy(), dict(hs.locked), hs.zones, dict(hs.slip),
                 dict(hs.stick_at), len(rec))
-            n0 = len(rec)
+            n0, t_seg = len(rec), t
             end = integ.advance(t, q, v, rec)
             stats.segments += 1
             retry = None
@@ -314,8 +314,10 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 integ.after_events(done)
             if end.reason == "singular":
                 n_events = len(events)
+                # a segment that recorded nothing restarts the last crossing, whose
+                # instant lies before it
                 cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry,
-                                          stalled)
+                                          stalled, -math.inf if stalled else t_seg)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events

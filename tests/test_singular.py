@@ -14,6 +14,7 @@ from scipy.integrate import quad
 
 import cmm_dae as cd
 from cmm_dae import iftomm
+from cmm_dae.singular import step_over
 
 from refs import short_coupler_four_bar
 
@@ -339,3 +340,55 @@ def test_singular_positions_ida_integrates_through_are_logged(n):
     ks = res.data["event_sample"]
     silent = [(e, k) for e, k in zip(sing, ks, strict=True) if "through" in e.note]
     assert all(res.t[k - 1] <= e.t < res.t[k] for e, k in silent)
+
+
+def _a02_state(n: int, theta: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """A02's exact state on the parallelogram branch with every crank at ``theta`` (rad),
+    moving clockwise with the speed its energy gives, in the model's centroid coordinates
+    (cranks, then couplers): q, v and the crank rate (rad/s)."""
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
+    w = -math.sqrt(1.0 + 2.0 * c * (1.0 - math.sin(theta)) / inertia)
+    s, k = math.sin(theta), math.cos(theta)
+    q = [[i + 0.5 * k, 0.5 * s, theta] for i in range(n + 1)]
+    q += [[i - 0.5 + k, s, 0.0] for i in range(1, n + 1)]
+    v = [[-0.5 * w * s, 0.5 * w * k, w]] * (n + 1) + [[-w * s, w * k, 0.0]] * n
+    return np.ravel(q), np.ravel(v), w
+
+
+def test_a02_n40_crossing_steps_end_at_the_instant_along_their_own_path():
+    """A crossing from 0.48 rad before A02's horizontal crank position (40 loops, where
+    IDA gave up at rtol 1e-11): its steps must end at the singular instant itself. With
+    the instant from the second-order path ahead (3e-4 s off) a Gauss node fell next to
+    it and the velocities jumped by 1.8e-5: a dead point. The instant and the state after
+    the crossing against the one-DOF reduction (quadrature, energy)."""
+    n = 40
+    model = cd.Model(iftomm.a02_four_bar(n))
+    p = model.params()
+    theta0 = -math.pi + 0.48
+    q, v, _ = _a02_state(n, theta0)
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
+    # (the way out ends at t_end = 0.15 s, 0.06 s past the instant: the test's time)
+    cr = step_over(model, p, 0.0, q, v, 0.15, rtol=1e-11, atol=1e-13)
+    t_ref = quad(lambda x: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(x)))),
+                 -math.pi, theta0, epsabs=1e-14, epsrel=1e-13)[0]
+    assert abs(cr.t_singular - t_ref) <= 1e-9  # s
+    assert cr.velocity_jump <= 1e-7  # measured 6.9e-9 (1.8e-5 before)
+    assert f"joint G{n}" in " ".join(cr.labels) and cr.rank_drop == n
+    # after it: every crank at one angle, the couplers level, on the energy level
+    th = cr.q[2:3 * (n + 1):3]
+    assert np.ptp(th) <= 1e-12 and np.max(np.abs(cr.q[3 * (n + 1) + 2::3])) <= 1e-12
+    q_ref, v_ref, _ = _a02_state(n, float(th[0]))
+    assert np.max(np.abs(cr.v - v_ref)) <= 1e-8 * np.max(np.abs(v_ref))
+
+
+def test_a_failure_without_an_instant_behind_is_not_a_crossing():
+    """IDA failing where the constraints' conditioning rises (0.25 s after A02's first
+    singular instant, N = 10), in a segment that started after that instant, has not
+    stepped across one: a dead point, not a crossing logged at an instant outside the
+    segment (14.4 s was logged after a failed restart at 2.95 s on N = 40)."""
+    n = 10
+    model = cd.Model(iftomm.a02_four_bar(n))
+    q, v, _ = _a02_state(n, -1.2)
+    with pytest.raises(cd.SolverError, match="without having stepped across") as info:
+        step_over(model, model.params(), 1.0, q, v, 2.0, rtol=1e-10, atol=1e-12, t_min=0.9)
+    assert info.value.status is cd.Status.DEAD_POINT
