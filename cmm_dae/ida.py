@@ -352,10 +352,6 @@ class IdaIntegrator(Integrator):
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
         T, Y = np.asarray(r.t), np.asarray(r.y)
-        if r.status < 0 and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
-            # IDA cannot restart where a singular-position crossing ended: still too near
-            # it; the policy takes the crossing further out
-            return SegmentEnd(t0, q, v, (), "singular")
         h1 = self._first_step(y0, yp0, t_stop - t0) \
             if r.status < 0 and self.error is None and not first_step else 0.0
         if h1 > 0.0 and T[-1] - t0 < h1:
@@ -367,6 +363,11 @@ class IdaIntegrator(Integrator):
             # step from the accelerations is covered: again with that first step.
             self.first_step = h1
             return self.advance(t0, q, v, rec)
+        if r.status < 0 and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
+            # IDA cannot restart where a singular-position crossing ended, even with a first
+            # step from the accelerations: still too near it; the policy takes the
+            # crossing further out
+            return SegmentEnd(t0, q, v, (), "singular")
         if r.status < 0 and self.error is None and not self.relaxed and (
                 T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
             # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
