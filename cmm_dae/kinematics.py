@@ -196,7 +196,8 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
             if r.kind == "joint" and r.name in pins]
     if rank == A.shape[0] or not keep or rank < len(keep):
         return tuple(sorted(int(i) for i in piv[rank:]))
-    rest = np.array([i for i in range(A.shape[0]) if i not in set(keep)], dtype=int)
+    kept = set(keep)
+    rest = np.array([i for i in range(A.shape[0]) if i not in kept], dtype=int)
     Qk, _ = np.linalg.qr(A[keep].T)  # an orthonormal basis of the pins' rows
     B = A[rest] - (A[rest] @ Qk) @ Qk.T
     _, _, piv_r = qr(B.T, mode="economic", pivoting=True)

@@ -143,6 +143,11 @@ class Unknowns:
             ca.substitute(qz, z, yz[:nz]),
             ca.substitute(vz, ca.vertcat(z, w), yz)))])
         self._maps: dict[int, ca.Function] = {}
+        # every model row's multiplier from IDA's: a constant selection matrix (zero rows
+        # for the eliminated joints), built once for every symbolic() call
+        self._select = ca.DM(model.m, m)
+        for k, i in enumerate(self.rows.tolist()):
+            self._select[i, k] = 1.0
 
     @property
     def reduced(self) -> bool:
@@ -181,9 +186,5 @@ class Unknowns:
             return y[:nq], y[nq:2 * nq], y[2 * nq:2 * nq + m]
         qv = self._full(y[:2 * nz])
         nq = self.model.nq
-        # every row's multiplier: IDA's rows' scattered by a constant selection matrix
-        S = ca.DM(self.model.m, m)
-        for k, i in enumerate(self.rows.tolist()):
-            S[i, k] = 1.0
-        lam = ca.mtimes(S, y[2 * nz:2 * nz + m])
+        lam = ca.mtimes(self._select, y[2 * nz:2 * nz + m])
         return qv[:nq], qv[nq:], lam
