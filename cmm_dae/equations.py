@@ -26,7 +26,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sps
 from scipy.linalg.lapack import dgesv
+from scipy.sparse.linalg import splu
 
 from .buffers import Buffered, compile_functions
 from .laws import driver_expr, law_expr
@@ -41,6 +43,48 @@ def kkt_blocks(mass, Phi_q, free):
     """The KKT matrix ``[[M, Phi_q^T], [Phi_q, D]]`` for CasADi expressions (``mass`` the
     diagonal of M, ``free`` that of D: 1 on inactive lock rows)."""
     return ca.blockcat([[ca.diag(mass), Phi_q.T], [Phi_q, ca.diag(free)]])
+
+
+#: Size of the KKT matrix (coordinates plus constraint rows) from which :meth:`Model.kkt`
+#: factors it as a sparse matrix (SuperLU, partial pivoting as LAPACK's dense LU); below
+#: it, dense LAPACK. Set from validation/speed.py's KKT comparison (see its table).
+KKT_SPARSE_FROM = 160
+
+_SINGULAR_KKT = "singular KKT matrix (a dead point or redundant constraints)"
+
+
+class _SparseKKT:
+    """``[[M, Phi_q^T], [Phi_q, D]]`` as a CSC matrix of fixed pattern: the structural
+    nonzeros of Phi_q (CasADi's sparsity) and both diagonals, so that each solve only
+    gathers the values (no pattern search on the dense Jacobian). The whole KKT matrix,
+    not the Schur complement the outputs use (:mod:`cmm_dae.schur`): these single solves
+    serve the crossings of singular positions, where the complement's condition number is
+    the square of the constraint Jacobian's."""
+
+    def __init__(self, sparsity: ca.Sparsity, nq: int):
+        jr, jc = (np.asarray(x, dtype=np.int64) for x in sparsity.get_triplet())
+        m = sparsity.size1()
+        n = nq + m
+        self.jr, self.jc = jr, jc
+        d_m, d_f = np.arange(nq), nq + np.arange(m)
+        rows = np.concatenate([d_m, nq + jr, jc, d_f])
+        cols = np.concatenate([d_m, jc, nq + jr, d_f])
+        # where each (row, col) entry lands in CSC order: built once from its positions
+        order = sps.csc_matrix((np.arange(1, rows.size + 1, dtype=float), (rows, cols)),
+                               shape=(n, n))
+        order.sort_indices()
+        self.perm = order.data.astype(np.int64) - 1
+        self.indices, self.indptr, self.n = order.indices, order.indptr, n
+
+    def solve(self, mass: np.ndarray, Phi_q: np.ndarray, free: np.ndarray,
+              rhs: np.ndarray) -> np.ndarray:
+        vals = Phi_q[self.jr, self.jc]
+        data = np.concatenate([mass, vals, vals, free])[self.perm]
+        A = sps.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        try:
+            return splu(A, permc_spec="COLAMD").solve(rhs)
+        except RuntimeError as e:  # "Factor is exactly singular"
+            raise np.linalg.LinAlgError(_SINGULAR_KKT) from e
 
 
 def _rot(th):
@@ -365,6 +409,9 @@ class Model:
         self.event_parts = Buffered(ca.Function(
             "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
         self._kkt_templates: dict[bytes, np.ndarray] = {}
+        self._kkt_sparse = _SparseKKT(Phi_q.sparsity(), self.nq)
+        #: whether :meth:`kkt` factors the KKT matrix as a sparse one
+        self.kkt_sparse = self.nq + self.m >= KKT_SPARSE_FROM
         self._active: dict[bytes, np.ndarray] = {}
         self._maps: dict[tuple[str, int], Buffered] = {}
 
@@ -523,6 +570,10 @@ class Model:
     def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The KKT solve of :meth:`kkt` from its already evaluated parts."""
+        rhs = np.concatenate([Qf, gamma])
+        if self.kkt_sparse:
+            sol = self._kkt_sparse.solve(self.mass, Phi_q, self.free_rows(p), rhs)
+            return sol[:self.nq], sol[self.nq:], Phi_q
         key = p[:self._u0].tobytes()  # the configuration, not the callable loads' values
         tpl = self._kkt_templates.get(key)
         if tpl is None:  # the constant blocks (M, D) of this configuration, built once
@@ -531,10 +582,9 @@ class Model:
         A[:self.nq, self.nq:] = Phi_q.T
         A[self.nq:, :self.nq] = Phi_q
         # LAPACK directly: half the overhead of numpy.linalg.solve on these small systems
-        _, _, sol, info = dgesv(A, np.concatenate([Qf, gamma]))
+        _, _, sol, info = dgesv(A, rhs)
         if info != 0:
-            raise np.linalg.LinAlgError("singular KKT matrix (a dead point or redundant "
-                                        "constraints)")
+            raise np.linalg.LinAlgError(_SINGULAR_KKT)
         return sol[:self.nq], sol[self.nq:], Phi_q
 
     def kkt_system(self, q, v, t, p) -> tuple[ca.MX | ca.SX, ca.MX | ca.SX]:

@@ -8,8 +8,12 @@
 4. Growth of wall time per simulated second with size on chains of 8, 16 and 32 four-bar
    loops.
 5. Peak memory of a long run against the Result's own arrays (``memory.py``).
+6. The KKT solve (accelerations and multipliers at one state): sparse (SuperLU) against
+   dense (LAPACK) LU by size, on A02's N-loop chains; where cmm_dae switches
+   (``KKT_SPARSE_FROM``).
 
-Writes validation/out/speed/speed.md. Run: python validation/speed.py  (a few minutes)
+Writes validation/out/speed/speed.md. Run: python validation/speed.py  (a few minutes);
+``--kkt-only`` runs part 6 alone.
 """
 
 from __future__ import annotations
@@ -18,10 +22,12 @@ import argparse
 import contextlib
 import cProfile
 import io
+import math
 import pstats
 import statistics
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -32,7 +38,9 @@ import before_after  # noqa: E402
 import memory  # noqa: E402
 
 import cmm_dae as cd  # noqa: E402
+from cmm_dae import iftomm  # noqa: E402
 from cmm_dae.bench import chain_growth, chain_table  # noqa: E402
+from cmm_dae.equations import KKT_SPARSE_FROM  # noqa: E402
 
 #: profile entries (file fragment, function) -> part
 PARTS = [
@@ -66,11 +74,43 @@ def profile_shares(mech: cd.Mechanism, model: cd.Model) -> list[tuple[str, float
     return shares
 
 
+def kkt_sizes(loops=(4, 8, 10, 12, 14, 16, 20, 40), rounds: int = 3) -> list[str]:
+    """Sparse over dense KKT solve time on A02 with each number of loops, the cranks at
+    0.3 rad past the horizontal (best of ``rounds`` alternating 0.3-s batches each)."""
+    out = [f"cmm_dae factors as sparse from size {KKT_SPARSE_FROM}.", "",
+           "| loops | KKT size | dense [us] | sparse [us] | sparse / dense |",
+           "|---:|---:|---:|---:|---:|"]
+    for n in loops:
+        model = cd.Model(iftomm.a02_four_bar(n))
+        p = model.params()
+        th = -math.pi + 0.3
+        q = [[i + 0.5 * math.cos(th), 0.5 * math.sin(th), th] for i in range(n + 1)]
+        q += [[i - 0.5 + math.cos(th), math.sin(th), 0.0] for i in range(1, n + 1)]
+        q = [x for row in q for x in row]
+        parts = model._kkt_parts(q, [0.0] * len(q), 0.0, p)
+        best = {False: math.inf, True: math.inf}
+        for _ in range(rounds):
+            for mode in best:
+                model.kkt_sparse = mode
+                t0, k = time.perf_counter(), 0
+                while time.perf_counter() - t0 < 0.3:
+                    model.kkt_from(*parts, p)
+                    k += 1
+                best[mode] = min(best[mode], (time.perf_counter() - t0) / k)
+        out.append(f"| {n} | {model.nq + model.m} | {best[False] * 1e6:.0f} | "
+                   f"{best[True] * 1e6:.0f} | {best[True] / best[False]:.2f} |")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--memory-t-end", type=float, default=1000.0)
+    ap.add_argument("--kkt-only", action="store_true", help="part 6 alone (printed)")
     a = ap.parse_args(argv)
+    if a.kkt_only:
+        print("\n".join(kkt_sizes()))
+        return 0
     OUT.mkdir(parents=True, exist_ok=True)
     lines = ["# Speed", "", f"Python {sys.version.split()[0]}, {sys.platform}; ratios "
              "measured side by side in this run.", ""]
@@ -132,6 +172,9 @@ def main(argv: list[str] | None = None) -> int:
         memory.main(["--t-end", str(a.memory_t_end)])
     lines += [buf.getvalue().rstrip(), "```", ""]
     print("\n".join(lines[-4:]), flush=True)
+    lines += ["## 6. KKT solve: sparse over dense LU by size (A02, N loops)", "",
+              *kkt_sizes(), ""]
+    print("\n".join(lines[-12:]), flush=True)
     (OUT / "speed.md").write_text("\n".join(lines))
     print(f"wrote {OUT / 'speed.md'}")
     return 0
