@@ -74,11 +74,13 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     if stalled and events and events[-1].kind == "singular" and after[-1] == len(rec) - 1:
         # the integrator could not restart where the last crossing ended: the same
         # crossing, taken further out (one event, its sample moved)
-        for x, qx, vx in inside:
-            rec.add(x, qx, vx, cfg)
-        rec.add(cr.t_after, cr.q, cr.v, cfg)
+        _add_window(rec, inside, cr, cfg, integ)
         after[-1] = len(rec) - 1
-        integ.after_singular(cr.t_after)
+        return cr, kept
+    if not cr.instant:
+        # only the way out of a near-singular position the run started at (or left
+        # already, its instant logged): samples, no event
+        _add_window(rec, inside, cr, cfg, integ)
         return cr, kept
     how = ("crossed on the branch of the motion, velocities continuous to "
            f"{cr.velocity_jump:.1e}")
@@ -91,15 +93,22 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
                f"to {cr.velocity_jump:.1e}")
     events.append(_event(cr.t_singular, cr.labels, cr.rank_drop, cr.ratio_min, how, side,
                          cfg, float(np.linalg.norm(v)), float(np.linalg.norm(cr.v))))
-    for x, qx, vx in inside:
-        rec.add(x, qx, vx, cfg)
-    rec.add(cr.t_after, cr.q, cr.v, cfg)
+    _add_window(rec, inside, cr, cfg, integ)
     after.append(len(rec) - 1)
-    integ.after_singular(cr.t_after)
     if len(events) > opts.max_events:
         raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s (last: "
                           "a singular position)", status=Status.MAX_EVENTS)
     return cr, kept
+
+
+def _add_window(rec: Recorder, inside: list, cr: Crossing, cfg: int,
+                integ: Integrator) -> None:
+    """The crossing's samples on the output grid, the state after it, and the integrator
+    told where to go on from."""
+    for x, qx, vx in inside:
+        rec.add(x, qx, vx, cfg)
+    rec.add(cr.t_after, cr.q, cr.v, cfg)
+    integ.after_singular(cr.t_after)
 
 
 def _event(t: float, labels: list[str], drop: int, ratio: float, how: str, side: str,

@@ -29,6 +29,7 @@ from .errors import CmmError, SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .kinematics import project_state, row_names, singular_ratio
 from .result import Stats
+from .singular import PAST_RATIO
 from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
 
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
@@ -377,6 +378,7 @@ class IdaIntegrator(Integrator):
             self.relax_multipliers()
             return self.advance(t0, q, v, rec)
         keep = np.arange(1, T.size)
+        keep = keep[T[keep] > t0]  # (a failure without a step returns t0 once more)
         if extra is not None:
             keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
         if self.error is not None:  # only what was computed before the failure
@@ -391,10 +393,13 @@ class IdaIntegrator(Integrator):
                               f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
         if r.status < 0:
             self.v_fail = v1
-            message, status = self._failure(r, t1, q1)
-            if status is Status.DEAD_POINT and t1 > t0:
+            message, status, ratio = self._failure(r, t1, q1)
+            if status is Status.DEAD_POINT or max(ratio, self.ratio0) < PAST_RATIO:
                 # the constraints collapse ahead: let the policy try to cross (a singular
-                # position on the motion's branch), which says "dead point" if it cannot
+                # position on the motion's branch), which says "dead point" if it cannot;
+                # or the segment started next to one and failed on its way out (A02 started
+                # 0.05 rad past the horizontal at rtol 1e-11), which the crossing's way
+                # out covers
                 return SegmentEnd(t1, q1, v1, (), "singular")
             raise SolverError(message, status=status)
         if r.status == 2 and self.stalled:
@@ -441,7 +446,9 @@ class IdaIntegrator(Integrator):
         h = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
         return singular_ratio(self.model, q + v * h, tt + h, self.p) < ratio
 
-    def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status]:
+    def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status, float]:
+        """The message and status of IDA's failure at (tt, q), and the constraints'
+        singular-value ratio there."""
         cfg = self.hs.configurations[self.hs.current()].label
         # the constraint rows' conditioning at the failure against the segment's start: a
         # dead point shows as a collapse of the smallest singular value (units mix, so
@@ -458,4 +465,5 @@ class IdaIntegrator(Integrator):
             what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
                     "tolerances may be too tight or the forces too stiff)")
             status = Status.INTEGRATOR
-        return f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})", status
+        return (f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})", status,
+                ratio)

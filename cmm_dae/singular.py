@@ -91,6 +91,11 @@ class Crossing:
     #: switch repeats its instant with the new velocities): :meth:`state_at` steps from
     #: them.
     ends: tuple = ()
+    #: False for a way out only: the motion leaves a near-singular position whose instant
+    #: lies before the segment (the run's start, or an instant crossed and logged
+    #: already); ``t_singular`` is then where that instant extrapolates to, and nothing
+    #: is to be logged.
+    instant: bool = True
 
     @property
     def t0(self) -> float:
@@ -177,18 +182,26 @@ def _accurate_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.n
     The error of one step of ``h`` is estimated by step doubling (two steps of h / 2 are
     16 / 15 of the way to the exact solution, the method being of order 4) in IDA's
     weighted root-mean-square norm; the step then scales with the error's fifth root,
-    from a tenth to ten times ``h``."""
-    try:
-        q1, v1, _ = _gl2_step(model, p, t, q, v, h, guess)
-        qa, va, g = _gl2_step(model, p, t, q, v, 0.5 * h, guess)
-        q2, v2, _ = _gl2_step(model, p, t + 0.5 * h, qa, va, 0.5 * h, g)
-    except np.linalg.LinAlgError:
-        return h
-    y1, y2 = np.concatenate([q1, v1]), np.concatenate([q2, v2])
-    err = 16.0 / 15.0 * float(np.sqrt(np.mean(((y2 - y1) / (rtol * np.abs(y2) + atol)) ** 2)))
-    if not err > 0.0:
-        return 10.0 * h
-    return h * float(np.clip((SAFETY / err) ** 0.2, 0.1, 10.0))
+    from a tenth to ten times ``h``; where that is cut at a tenth, estimated again from
+    there (a trial step far too long says little: from 1.2 rad past A02's singular position
+    the first estimate, cut, left a velocity error of 3e-8 at rtol 1e-10)."""
+    for _ in range(6):
+        try:
+            q1, v1, _ = _gl2_step(model, p, t, q, v, h, guess)
+            qa, va, g = _gl2_step(model, p, t, q, v, 0.5 * h, guess)
+            q2, v2, _ = _gl2_step(model, p, t + 0.5 * h, qa, va, 0.5 * h, g)
+        except np.linalg.LinAlgError:
+            return h
+        y1, y2 = np.concatenate([q1, v1]), np.concatenate([q2, v2])
+        err = 16.0 / 15.0 * float(np.sqrt(np.mean(((y2 - y1) / (rtol * np.abs(y2) + atol))
+                                                  ** 2)))
+        if not err > 0.0:
+            return 10.0 * h
+        factor = (SAFETY / err) ** 0.2
+        if factor >= 0.1:
+            break
+        h *= 0.1
+    return h * float(np.clip(factor, 0.1, 10.0))
 
 
 def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float,
@@ -275,6 +288,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     probe = 1e-6 / max(vnorm, 1e-300)
     rate = (_ratio(model, path(probe), t + probe, p) - r0) / probe
     past = rate >= 0.0
+    leaving = False
     if past and not r0 < PAST_RATIO:
         raise dead("the motion does not approach a singular position: it cannot go on")
     if past and rule is not None:
@@ -287,6 +301,10 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         # the way out is left to cross
         tau_back = r0 / max(rate, 1e-300)
         tau, r_min, t_s = 0.0, r0, t - min(tau_back, t)
+        # an instant behind the segment's start (or the run's) was not stepped across
+        # in it: the motion only leaves a near-singular position (a run started next to
+        # one, or IDA failing again on the way out of one crossed already)
+        leaving = t - tau_back < max(t_min, 0.0)
         nsub = 0
         h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
         h_ok = h = min(h, _accurate_step(model, p, t, q, v, h, a0, rtol, atol))
@@ -393,18 +411,19 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     drop = rank_drop(model, ends[nsub][1] if nsub >= 1 else path(tau), t_s, p, r0)
     if not past:  # the instant along the Gauss steps, not the second-order path ahead
         t_s = singular_instant(model, p, ends, t_s)
-    elif t_s > 0.0:  # behind the start: one Gauss step back twice as far brackets it
+    elif t_s > 0.0 and not leaving:  # behind: one Gauss step back twice as far brackets it
         back = max(t - 2.0 * (t - t_s), 0.0)
         try:
             qb, vb, _ = _gl2_step(model, p, t, q, v, back - t, a0)
             t_s = singular_instant(model, p, [(back, qb, vb)] + ends, t_s)
         except np.linalg.LinAlgError:
             pass  # the extrapolated instant stands
-    if past and not max(t_min, 0.0) <= t_s <= t:
+    if past and not leaving and not max(t_min, 0.0) <= t_s <= t:
         # No instant behind inside the segment: the integrator did not step across one
         # (after A02's third crossing with 40 loops at rtol 1e-11 IDA failed 4e-8 s into
         # its restart, where the ratio peaks; the instant "behind" came out at 14.4 s).
         raise dead("the integrator failed without having stepped across a singular "
                    "position: it cannot go on")
-    return Crossing(t_s, tt, q1, v1, labels, drop, r_min, jump, switched,
-                    tuple(taken), nsub, tuple(ends))
+    return Crossing(t - tau_back if past and leaving else t_s, tt, q1, v1, labels, drop,
+                    r_min, jump, switched, tuple(taken), nsub, tuple(ends),
+                    instant=not (past and leaving))
