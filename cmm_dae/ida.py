@@ -29,7 +29,7 @@ from .errors import CmmError, SolverError, Status
 from .integrator import Integrator, Recorder, RunOptions, SegmentEnd
 from .kinematics import project_state, row_names, singular_ratio
 from .result import Stats
-from .singular import PAST_RATIO
+from .singular import PAST_RATIO, leaves_singular
 from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
 
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
@@ -394,7 +394,9 @@ class IdaIntegrator(Integrator):
         if r.status < 0:
             self.v_fail = v1
             message, status, ratio = self._failure(r, t1, q1)
-            if status is Status.DEAD_POINT or max(ratio, self.ratio0) < PAST_RATIO:
+            if status is Status.DEAD_POINT or (
+                    max(ratio, self.ratio0) < PAST_RATIO
+                    and leaves_singular(self.model, self.p, t1, q1, v1)):
                 # the constraints collapse ahead: let the policy try to cross (a singular
                 # position on the motion's branch), which says "dead point" if it cannot;
                 # or the segment started next to one and failed on its way out (A02 started

@@ -57,6 +57,10 @@ NODE_RATIO = 5e-5
 END_RATIO = 0.03
 #: Below this singular-value ratio a failure just past a singular instant is crossed too.
 PAST_RATIO = 0.1
+#: A failure moving away from a singular position the segment started after is only a way
+#: out if the ratio back where it extrapolates to zero is below this share of the ratio at
+#: the failure.
+LEAVING_RATIO = 0.25
 #: The crossing ends where the singular-value ratio is this many times the one at its start.
 AFTER = 12.0
 #: Relative singular value counted as zero by the projections at the singular instant.
@@ -135,6 +139,32 @@ def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     if J.shape[0] > J.shape[1]:
         return 0.0
     return float(s[-1] / s[0]) if s.size and s[0] > 0 else 1.0
+
+
+def _collapsed_behind(model: Model, p: np.ndarray, t: float, q_back: np.ndarray,
+                      tau_back: float, r0: float) -> bool:
+    """Whether the ratio at ``q_back``, where it extrapolates to zero ``tau_back`` (s)
+    before t, has collapsed below :data:`LEAVING_RATIO` times ``r0``: a singular position
+    behind, not a ratio that is only low (as on long chains)."""
+    return _ratio(model, q_back, t - tau_back, p) < LEAVING_RATIO * r0
+
+
+def leaves_singular(model: Model, p: np.ndarray, t: float, q: np.ndarray,
+                    v: np.ndarray) -> bool:
+    """Whether the motion at (t, q, v) moves away from a singular position just behind it
+    (the singular-value ratio rising and, where it extrapolates to zero on the
+    second-order path back, collapsed): where IDA's failure is the crossing's to take."""
+    r0 = _ratio(model, q, t, p)
+    vnorm = float(np.max(np.abs(v), initial=0.0))
+    if not (0.0 < r0 < PAST_RATIO and vnorm > 0.0):
+        return False
+    a0 = model.kkt(q, v, t, p)[0]
+    probe = 1e-6 / vnorm
+    rate = (_ratio(model, q + v * probe + 0.5 * a0 * probe * probe, t + probe, p) - r0) / probe
+    if not rate > 0.0:
+        return False
+    tau = r0 / rate
+    return _collapsed_behind(model, p, t, q - v * tau + 0.5 * a0 * tau * tau, tau, r0)
 
 
 def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
@@ -303,8 +333,11 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         tau, r_min, t_s = 0.0, r0, t - min(tau_back, t)
         # an instant behind the segment's start (or the run's) was not stepped across
         # in it: the motion only leaves a near-singular position (a run started next to
-        # one, or IDA failing again on the way out of one crossed already)
-        leaving = t - tau_back < max(t_min, 0.0)
+        # one, or IDA failing again on the way out of one crossed already), if there is
+        # one back there: the ratio where it extrapolates to zero must have collapsed (a
+        # ratio that is only low, as on long chains, is no singular position)
+        leaving = t - tau_back < max(t_min, 0.0) and _collapsed_behind(
+            model, p, t, path(-tau_back), tau_back, r0)
         nsub = 0
         h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
         h_ok = h = min(h, _accurate_step(model, p, t, q, v, h, a0, rtol, atol))

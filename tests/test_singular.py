@@ -383,21 +383,44 @@ def test_a02_n40_crossing_steps_end_at_the_instant_along_their_own_path():
 
 
 def test_a_failure_without_an_instant_behind_is_only_a_way_out():
-    """IDA failing where the constraints' conditioning rises (1.2 rad past A02's first
-    singular position, N = 10), in a segment that started after that instant, has not
-    stepped across one: no instant to log (14.4 s was logged after a failed restart at
-    2.95 s on N = 40), only Gauss steps out to where IDA restarts, on the branch."""
+    """IDA failing where the constraints' conditioning rises, in a segment that started
+    after A02's first singular instant (N = 10), has not stepped across one: no instant to
+    log (14.4 s was logged after a failed restart at 2.95 s on N = 40). 0.3 rad past it
+    the ratio collapses back where it extrapolates to zero (5.7e-4 against 1.8e-2): Gauss
+    steps out to where IDA restarts, on the branch. 1.2 rad past it, it does not (0.051
+    against 0.059): a dead point, as any failure away from singular positions."""
     n = 10
     model = cd.Model(iftomm.a02_four_bar(n))
-    q, v, _ = _a02_state(n, -1.2)
-    cr = step_over(model, model.params(), 1.0, q, v, 2.0, rtol=1e-10, atol=1e-12, t_min=0.9)
-    assert not cr.instant and cr.t_singular < 0.9 and cr.t_after > 1.0
+    q, v, _ = _a02_state(n, -0.3)  # 0.056 s after the instant
+    cr = step_over(model, model.params(), 1.0, q, v, 2.0, rtol=1e-10, atol=1e-12, t_min=0.99)
+    assert not cr.instant and cr.t_singular < 0.99 and cr.t_after > 1.0
     th = cr.q[2:3 * (n + 1):3]
-    assert np.ptp(th) <= 1e-12 and float(th[0]) < -1.2
+    assert np.ptp(th) <= 1e-12 and float(th[0]) < -0.3
     _, v_ref, _ = _a02_state(n, float(th[0]))  # the energy the branch has at that angle
-    # measured 2.8e-11 relative (3.1e-8 when the first, far too long trial step's error
-    # estimate was only cut to a tenth and taken)
+    # measured 3.3e-10 relative
     assert np.max(np.abs(cr.v - v_ref)) <= 1e-9 * np.max(np.abs(v_ref))
+    q, v, _ = _a02_state(n, -1.2)
+    with pytest.raises(cd.SolverError, match="without having stepped across") as info:
+        step_over(model, model.params(), 1.0, q, v, 2.0, rtol=1e-10, atol=1e-12, t_min=0.9)
+    assert info.value.status is cd.Status.DEAD_POINT
+
+
+def test_way_out_steps_meet_the_tolerance():
+    """A way out from 0.6 rad past A02's singular position (N = 10; the ratio back at the
+    instant collapses): the crossing's first accurate-step estimate came from a trial step
+    far too long and was cut to a tenth of it; taken as it was, the steps were the same at
+    every rtol and the velocities 7.1e-10 off the branch's energy at rtol 1e-12. Now
+    estimated again from there."""
+    n = 10
+    model = cd.Model(iftomm.a02_four_bar(n))
+    q, v, _ = _a02_state(n, -0.6)
+    for rtol in (1e-10, 1e-12):
+        cr = step_over(model, model.params(), 1.0, q, v, 2.0, rtol=rtol, atol=rtol * 1e-2,
+                       t_min=0.9)
+        th = cr.q[2:3 * (n + 1):3]
+        _, v_ref, _ = _a02_state(n, float(th[0]))
+        # measured 2.8e-10 and 6.8e-12 relative
+        assert np.max(np.abs(cr.v - v_ref)) <= 20.0 * rtol * np.max(np.abs(v_ref))
 
 
 @pytest.mark.parametrize(("n", "theta0"), [(1, -0.05), (10, -0.05), (1, 0.05)])
