@@ -266,7 +266,9 @@ def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.n
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
               t_end: float, rule: tuple[str, int] | None = None, *, rtol: float = 1e-8,
               atol: float = 1e-10, t_min: float = -math.inf) -> Crossing:
-    """Cross the singular position ahead of the state (t, q, v) on the branch of the motion.
+    """Cross the singular position ahead of the state (t, q, v) on the branch of the motion
+    (or the one just behind it that the integrator stepped across; or, where that lies
+    before the segment, only carry the motion out of its neighbourhood).
 
     Parameters
     ----------
@@ -292,6 +294,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     Returns
     -------
     Crossing
+        ``instant`` False for a way out only (nothing to log).
 
     Raises
     ------
