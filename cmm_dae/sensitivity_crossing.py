@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .gauss import GL_A, GL_B, gl2_step
 from .hybrid import SegmentTrace
 from .kinematics import project_state, singular_ratio
-from .singular import _A, _B, _gl2_step
 from .singular_instant import hermite, null_vectors
 
 __all__ = ["CrossingPass", "TAU_RATIO"]
@@ -127,17 +127,17 @@ class CrossingPass:
         return ends
 
     def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP):
-        """One Gauss step of the crossing (:func:`cmm_dae.singular._gl2_step`) and its
+        """One Gauss step of the crossing (:func:`cmm_dae.gauss.gl2_step`) and its
         derivative: the Gauss method on the variational equations, the stage tangents made
         consistent with the constraints as the stage states are (the derivative of the
         projections); returns (q, v, s_q, s_v, next guess)."""
         nq = self.model.nq
         stages: list = []
-        qn, vn, guess = _gl2_step(self.model, p, t, q, v, h, guess, stages)
+        qn, vn, guess = gl2_step(self.model, p, t, q, v, h, guess, stages)
         L = np.zeros((2, nq, self.P))
         for _ in range(50):  # the stages' linear equations, by the state's iteration
-            dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
-            dQ = sq[None] + h * np.einsum("ij,jkl->ikl", _A, dV)
+            dV = sv[None] + h * np.einsum("ij,jkl->ikl", GL_A, L)
+            dQ = sq[None] + h * np.einsum("ij,jkl->ikl", GL_A, dV)
             Ln = np.empty_like(L)
             for i, (ti, Qi, Vi) in enumerate(stages):
                 zq, zv = self.project(Qi, Vi, ti, p, dP, dQ[i], dV[i])
@@ -146,6 +146,6 @@ class CrossingPass:
             L = Ln
             if change <= 1e-13 * (1.0 + float(np.max(np.abs(L)))):
                 break
-        dV = sv[None] + h * np.einsum("ij,jkl->ikl", _A, L)
-        return (qn, vn, sq + h * np.einsum("i,ikl->kl", _B, dV),
-                sv + h * np.einsum("i,ikl->kl", _B, L), guess)
+        dV = sv[None] + h * np.einsum("ij,jkl->ikl", GL_A, L)
+        return (qn, vn, sq + h * np.einsum("i,ikl->kl", GL_B, dV),
+                sv + h * np.einsum("i,ikl->kl", GL_B, L), guess)

@@ -38,15 +38,9 @@ from scipy.optimize import minimize_scalar
 from .branches import choose_branch, other_branches
 from .equations import Model
 from .errors import SolverError, Status
-from .kinematics import dependent_rows, project_state, rank_drop, row_names
+from .gauss import GL_C, accurate_step, gl2_step, project
+from .kinematics import dependent_rows, rank_drop, row_names
 from .singular_instant import singular_instant
-
-#: Gauss-Legendre, two stages (order 4): nodes and coefficients.
-_S3 = math.sqrt(3.0) / 6.0
-_C = np.array([0.5 - _S3, 0.5 + _S3])
-_A = np.array([[0.25, 0.25 - _S3], [0.25 + _S3, 0.25]])
-_B = np.array([0.5, 0.5])
-
 
 #: Gauss steps from the last good state to the singular instant.
 SUBSTEPS = 6
@@ -69,9 +63,6 @@ SINGULAR_RCOND = 1e-8
 MAX_STEPS_OUT = 2000
 #: Steps between two estimates of the accurate step on the way out.
 RECHECK = 16
-#: Share of the tolerance a Gauss step's local error may take (the steps of a crossing
-#: follow each other without an error test of their own).
-SAFETY = 0.25
 
 
 @dataclass(frozen=True)
@@ -129,8 +120,8 @@ class Crossing:
         on a long way out they drift by up to 2e-7 m at rtol 1e-10)."""
         t0, q0, v0 = self.ends[self.start_for(t)]
         if t != t0:
-            q0, v0, _ = _gl2_step(model, p, t0, q0, v0, t - t0, model.kkt(q0, v0, t0, p)[0])
-        return _project(model, p, q0, v0, t)[:2]
+            q0, v0, _ = gl2_step(model, p, t0, q0, v0, t - t0, model.kkt(q0, v0, t0, p)[0])
+        return project(model, p, q0, v0, t)[:2]
 
 
 def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
@@ -167,84 +158,6 @@ def leaves_singular(model: Model, p: np.ndarray, t: float, q: np.ndarray,
     return _collapsed_behind(model, p, t, q - v * tau + 0.5 * a0 * tau * tau, tau, r0)
 
 
-def _gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-              h: float, guess: np.ndarray, stages: list | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One two-stage Gauss-Legendre step of q' = v, v' = a(t, q, v).
-
-    The accelerations are taken at the stage states projected onto the constraints: off
-    them, near a singular position, the KKT accelerations are so sensitive to the
-    constraint violation that a plain fixed-point iteration of the stages diverges. The
-    iteration stops when the stage accelerations no longer change beyond their round-off
-    (which the near-singular solve amplifies to about 1e-9 of their size). ``guess``
-    predicts the stage accelerations (never the acceleration at the step's start, which
-    may be the singular instant itself, where it is undetermined); returns q, v and the
-    last stage's acceleration (the next step's guess). ``stages``, when given, receives
-    the two projected stage states (t, q, v) of the last iteration."""
-    def acc(tt, qq, vv):
-        q1, v1, _ = _project(model, p, qq, vv, tt)
-        return model.kkt(q1, v1, tt, p)[0]
-
-    K = np.array([guess, guess])  # stage accelerations
-    scale = 1.0 + float(np.max(np.abs(guess)))
-    for _ in range(12):
-        V = v + h * (_A @ K)
-        Qs = q + h * (_A @ V)
-        Kn = np.array([acc(t + _C[i] * h, Qs[i], V[i]) for i in range(2)])
-        change = float(np.max(np.abs(Kn - K)))
-        K = Kn
-        if change <= 1e-8 * scale:
-            break
-        if not change < 1e3 * scale:
-            raise np.linalg.LinAlgError("the Gauss stages diverge")
-    V = v + h * (_A @ K)
-    if stages is not None:
-        Qs = q + h * (_A @ V)
-        stages[:] = [(t + _C[i] * h, *_project(model, p, Qs[i], V[i], t + _C[i] * h)[:2])
-                     for i in range(2)]
-    return q + h * (_B @ V), v + h * (_B @ K), K[1]
-
-
-def _accurate_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                   h: float, guess: np.ndarray, rtol: float, atol: float) -> float:
-    """The longest Gauss step from (t, q, v) whose local error meets the tolerances, s.
-
-    The error of one step of ``h`` is estimated by step doubling (two steps of h / 2 are
-    16 / 15 of the way to the exact solution, the method being of order 4) in IDA's
-    weighted root-mean-square norm; the step then scales with the error's fifth root,
-    from a tenth to ten times ``h``; where that is cut at a tenth, estimated again from
-    there (a trial step far too long says little: on a way out from 0.6 rad past A02's
-    singular position the cut estimate gave the same steps at every rtol, 7.1e-10 off the
-    branch's velocities at rtol 1e-12)."""
-    for _ in range(6):
-        try:
-            q1, v1, _ = _gl2_step(model, p, t, q, v, h, guess)
-            qa, va, g = _gl2_step(model, p, t, q, v, 0.5 * h, guess)
-            q2, v2, _ = _gl2_step(model, p, t + 0.5 * h, qa, va, 0.5 * h, g)
-        except np.linalg.LinAlgError:
-            return h
-        y1, y2 = np.concatenate([q1, v1]), np.concatenate([q2, v2])
-        err = 16.0 / 15.0 * float(np.sqrt(np.mean(((y2 - y1) / (rtol * np.abs(y2) + atol))
-                                                  ** 2)))
-        if not err > 0.0:
-            return 10.0 * h
-        factor = (SAFETY / err) ** 0.2
-        if factor >= 0.1:
-            break
-        h *= 0.1
-    return h * float(np.clip(factor, 0.1, 10.0))
-
-
-def _project(model: Model, p: np.ndarray, q: np.ndarray, v: np.ndarray, t: float,
-             rcond: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
-    """Minimum-norm corrections onto the constraints (the kinematics' projections); the
-    largest position change. At the singular instant itself pass ``rcond``: the
-    collapsing singular value then counts as zero instead of amplifying the round-off
-    (its inverse took 3.6e-5 J of 31 J of kinetic energy off a branch switch)."""
-    q1, v1 = project_state(model, q, v, t, p, rcond)
-    return q1, v1, float(np.max(np.abs(q1 - q), initial=0.0))
-
-
 def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
                    a0: np.ndarray, tau: float, nsub: int) -> float:
     """Time from t to the singular instant along the Gauss steps themselves, s (``tau``
@@ -256,7 +169,7 @@ def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.n
     ends = [(t, q, v)]
     try:
         for _ in range(nsub + 2):
-            qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
+            qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
             tt += h
             ends.append((tt, qq, vv))
     except np.linalg.LinAlgError:
@@ -344,7 +257,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             model, p, t, path(-tau_back), tau_back, r0)
         nsub = 0
         h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
-        h_ok = h = min(h, _accurate_step(model, p, t, q, v, h, a0, rtol, atol))
+        h_ok = h = min(h, accurate_step(model, p, t, q, v, h, a0, rtol, atol))
     else:
         tau_lin = r0 / -rate
         opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
@@ -363,7 +276,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         # accelerations are dominated by the round-off the near-singular solve amplifies
         # (the node nearest it lies 0.211 h away, where the ratio is about
         # r0 * 0.211 / nsub).
-        h_ok = _accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
+        h_ok = accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
         nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / NODE_RATIO))
         if rule is not None or nsub >= 2:
             # A step must end at the instant itself: a branch rule is applied there, and
@@ -382,7 +295,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             # collocation polynomial spans the instant; the accelerations are not
             # needed there).
             nsub = 0
-            h = (tau + 20.0 * NODE_RATIO / -rate) / _C[0]
+            h = (tau + 20.0 * NODE_RATIO / -rate) / GL_C[0]
             h_ok = min(h_ok, h)
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
     # restart reliably) would take more than 100 of them: then growing ones.
@@ -404,12 +317,12 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         for k in range(nsub + MAX_STEPS_OUT + 200):
             if tt + h > t_end:
                 h = t_end - tt
-            qq, vv, guess = _gl2_step(model, p, tt, qq, vv, h, guess)
+            qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
             taken.append(h)
             tt += h
             ends.append((tt, qq, vv))
             if k == nsub - 1 and rule is not None:  # at the singular instant: which way
-                qs, vs, _ = _project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
+                qs, vs, _ = project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
                 others = other_branches(model, p, tt, qs, vs)
                 vnew, switched = choose_branch(model, vs, others, qs, rule, tt)
                 if switched:  # else the motion goes on undisturbed
@@ -426,12 +339,12 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
                     # the step the local error allows here, as the conditioning recovers:
                     # started a hair past the instant (the integrator had stepped across
                     # it), A02 at rtol 1e-8 kept 1e-5 s steps for 1941 steps
-                    h_max = max(h_max, min(_accurate_step(model, p, tt, qq, vv, h, guess,
+                    h_max = max(h_max, min(accurate_step(model, p, tt, qq, vv, h, guess,
                                                           rtol, atol), 0.25 * way_out))
                 h = min(h * grow, max(h, h_max))
     except np.linalg.LinAlgError as e:
         raise dead(f"the motion cannot be continued through it ({e})") from None
-    q1, v1, dq = _project(model, p, qq, vv, tt)
+    q1, v1, dq = project(model, p, qq, vv, tt)
     act = model.active_rows(p)
     closes = float(np.max(np.abs(model.constraints(q1, tt, p).phi[act]), initial=0.0))
     jump = float(np.max(np.abs(v1 - vv), initial=0.0)) / vnorm
@@ -451,7 +364,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     elif t_s > 0.0 and not leaving:  # behind: one Gauss step back twice as far brackets it
         back = max(t - 2.0 * (t - t_s), 0.0)
         try:
-            qb, vb, _ = _gl2_step(model, p, t, q, v, back - t, a0)
+            qb, vb, _ = gl2_step(model, p, t, q, v, back - t, a0)
             t_s = singular_instant(model, p, [(back, qb, vb)] + ends, t_s)
         except np.linalg.LinAlgError:
             pass  # the extrapolated instant stands
