@@ -449,3 +449,19 @@ def test_runs_started_next_to_a_singular_position(n, theta0):
         t_ref = quad(lambda x: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(x)))),
                      0.0, theta0, epsabs=1e-14, epsrel=1e-13)[0]
         assert len(sing) == 1 and abs(sing[0].t - t_ref) <= 1e-9
+
+
+def test_internal_steps_output_has_no_repeated_samples():
+    """With ``output_dt=None`` (IDA's own steps), a segment IDA gave up near a singular
+    position ended with its last time three times over (A02 N = 1 at rtol 1e-10: samples
+    788-790 and 1695-1697 at one time each); the passage search then divided by their
+    zero spacing. Samples are strictly increasing now, with no warning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = cd.run_dae(iftomm.a02_four_bar(1), 1.3, rtol=1e-10, atol=1e-12, output_dt=None)
+        loose = cd.run_dae(iftomm.a02_four_bar(1), 3.0, rtol=1e-8, output_dt=None)
+    for r, n_sing in ((res, 2), (loose, 3)):
+        assert np.all(np.diff(r.t) > 0.0)
+        assert sum(e.kind == "singular" for e in r.events) == n_sing
