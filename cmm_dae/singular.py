@@ -132,6 +132,14 @@ def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     return float(s[-1] / s[0]) if s.size and s[0] > 0 else 1.0
 
 
+def _ratio_rate(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                a0: np.ndarray, r0: float) -> float:
+    """Rate of the singular-value ratio (1/s) from ``r0`` at (t, q) along the second-order
+    path ahead, over a probe in which the fastest coordinate moves by 1e-6."""
+    probe = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
+    return (_ratio(model, q + v * probe + 0.5 * a0 * probe * probe, t + probe, p) - r0) / probe
+
+
 def _collapsed_behind(model: Model, p: np.ndarray, t: float, q_back: np.ndarray,
                       tau_back: float, r0: float) -> bool:
     """Whether the ratio at ``q_back``, where it extrapolates to zero ``tau_back`` (s)
@@ -150,8 +158,7 @@ def leaves_singular(model: Model, p: np.ndarray, t: float, q: np.ndarray,
     if not (0.0 < r0 < PAST_RATIO and vnorm > 0.0):
         return False
     a0 = model.kkt(q, v, t, p)[0]
-    probe = 1e-6 / vnorm
-    rate = (_ratio(model, q + v * probe + 0.5 * a0 * probe * probe, t + probe, p) - r0) / probe
+    rate = _ratio_rate(model, p, t, q, v, a0, r0)
     if not rate > 0.0:
         return False
     tau = r0 / rate
@@ -232,8 +239,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     if vnorm == 0.0:
         raise dead("the mechanism is at rest there")
     # the ratio falls about linearly to the singular instant: its rate gives the scale
-    probe = 1e-6 / max(vnorm, 1e-300)
-    rate = (_ratio(model, path(probe), t + probe, p) - r0) / probe
+    rate = _ratio_rate(model, p, t, q, v, a0, r0)
     past = rate >= 0.0
     leaving = False
     if past and not r0 < PAST_RATIO:
