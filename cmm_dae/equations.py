@@ -409,7 +409,9 @@ class Model:
         self.event_parts = Buffered(ca.Function(
             "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
         self._kkt_templates: dict[bytes, np.ndarray] = {}
-        self._kkt_sparse = _SparseKKT(Phi_q.sparsity(), self.nq)
+        # the sparse KKT's pattern, built on its first use (small models never use it)
+        self._phi_q_sparsity = Phi_q.sparsity()
+        self._kkt_sparse: _SparseKKT | None = None
         #: whether :meth:`kkt` factors the KKT matrix as a sparse one
         self.kkt_sparse = self.nq + self.m >= KKT_SPARSE_FROM
         self._active: dict[bytes, np.ndarray] = {}
@@ -572,6 +574,8 @@ class Model:
         """The KKT solve of :meth:`kkt` from its already evaluated parts."""
         rhs = np.concatenate([Qf, gamma])
         if self.kkt_sparse:
+            if self._kkt_sparse is None:
+                self._kkt_sparse = _SparseKKT(self._phi_q_sparsity, self.nq)
             sol = self._kkt_sparse.solve(self.mass, Phi_q, self.free_rows(p), rhs)
             return sol[:self.nq], sol[self.nq:], Phi_q
         key = p[:self._u0].tobytes()  # the configuration, not the callable loads' values
