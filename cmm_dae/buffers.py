@@ -91,14 +91,23 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
         return lib
     cache.mkdir(parents=True, exist_ok=True)
     files = [str(f) for f in sources or ()]
+    generated = None
     if funcs:
-        gen = ca.CodeGenerator(f"cmm_{key}.c")
+        # named by the process as the library's temporary file is: two processes building
+        # the same library (parallel test workers, a sweep's workers) must not compile a
+        # C file the other is still writing
+        gen = ca.CodeGenerator(f"cmm_{key}_{os.getpid()}.c")
         for f in funcs:
             gen.add(f)
-        files.append(str(Path(gen.generate(str(cache) + os.sep))))
+        generated = Path(gen.generate(str(cache) + os.sep))
+        files.append(str(generated))
     tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-    subprocess.run([cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
-                   check=True, capture_output=True, timeout=600)
+    try:
+        subprocess.run([cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
+                       check=True, capture_output=True, timeout=600)
+    finally:
+        if generated is not None:
+            generated.unlink(missing_ok=True)
     tmp.replace(lib)  # atomic: parallel runs never load a half-written library
     return lib
 
