@@ -13,7 +13,7 @@ from scipy.optimize import least_squares
 
 from .equations import Model
 from .errors import AssemblyError, ModelError, Problem
-from .events import stick_or_slip
+from .events import resting_rate, stick_or_slip
 from .hybrid import HybridState
 from .kinematics import redundant_rows
 from .result import Event
@@ -172,15 +172,6 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     locked (a ``lock`` event each)."""
     mech = model.mech
     known, rates = start_spec(mech)
-    # A joint given exactly on one of its limits is a candidate for a start on the stop.
-    on_stop = {}
-    for name in mech.limited_joints:
-        if name in mech.initial.joints:
-            lim = mech.joints[name].limits
-            val = mech.initial.joints[name]
-            for side, L in (("lower", lim.lower), ("upper", lim.upper)):
-                if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
-                    on_stop[name] = side
     q = assemble_positions(model, t0, hs.p, known, initial_guess(model))
     v = assemble_velocities(model, q, t0, hs.p, rates)
     hs.zones = initial_zones(model, q)
@@ -196,16 +187,26 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
                                   f"outside its limits [{lim.lower}, {lim.upper}]"))
     if beyond:
         raise ModelError(beyond, mech.source)
+    # A joint that assembles exactly on one of its limits (named in [initial] joints or
+    # not) is a candidate for a start on the stop; one moving into it is the run's first
+    # impact (events.start_triggers).
+    on_stop = {}
+    for name in mech.limited_joints:
+        lim = mech.joints[name].limits
+        val = float(c0[model.jidx[name]])
+        for side, L in (("lower", lim.lower), ("upper", lim.upper)):
+            if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
+                on_stop[name] = side
     events: list[Event] = []
+    cd0 = model.joint_rates(q, v)[1]
     for name, side in on_stop.items():
-        if rates.get(name, 0.0) != 0.0:
-            continue
+        if abs(cd0[model.jidx[name]]) > resting_rate(cd0):
+            continue  # moving in: an impact before the first step; moving out: free
         trial = {**hs.locked, name: side}
         if hs.lock_force(q, v, t0, name, trial) > 0.0:
             before = hs.current()
             hs.locked = trial
             events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
-    cd0 = model.joint_rates(q, v)[1]
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
         if name in hs.locked:
             continue

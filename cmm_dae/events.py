@@ -40,7 +40,8 @@ __all__ = [
     "Trigger", "at_limit",
     "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
     "impact_map", "initial_zones", "over_constrained", "project_positions",
-    "project_velocities", "release", "stick_or_slip", "would_reenter", "zeno", "zone_switch",
+    "project_velocities", "release", "resting_rate", "start_triggers", "stick_or_slip",
+    "would_reenter", "zeno", "zone_switch",
 ]
 
 
@@ -124,6 +125,35 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
         else:
             crossed = val < 0.0
         if crossed:
+            out.append(tr)
+    return out
+
+
+def resting_rate(cd: np.ndarray) -> float:
+    """Largest joint rate that counts as rest at an assembled start: round-off of the
+    velocity solve (a joint named at rest comes out at 1e-18, not 0)."""
+    return 1e-12 * max(1.0, float(np.max(np.abs(cd), initial=0.0)))
+
+
+def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
+    """Gaps that are zero at the start of a run and close: a joint that starts exactly on
+    its stop, moving into it.
+
+    A root finder only sees sign changes; an event function that starts at zero is decided
+    by its rate here, and the run applies these triggers (an impact or a lock) before it
+    integrates. Without it IDA carried a pendulum started on its stop, moving into it,
+    2 rad through the stop with status "success"."""
+    model = hs.model
+    c, cd = model.joint_rates(q, v)
+    still = resting_rate(cd)
+    out = []
+    for tr in event_list(model, hs.locked):
+        if tr.kind != "gap":
+            continue
+        k = model.jidx[tr.joint]
+        L = hs.limit_value(tr.joint, tr.side)
+        into = cd[k] < -still if tr.side == "lower" else cd[k] > still
+        if into and abs(c[k] - L) <= 1e-12 * max(1.0, abs(L)):
             out.append(tr)
     return out
 

@@ -266,9 +266,18 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     integ = cls(model, hs, opts, stats)
     status, message, err = Status.SUCCESS, "success", None
     t = 0.0
-    if trace is not None:
-        trace.append((q.copy(), v.copy(), list(events)))
     try:
+        # joints that start on a stop, moving into it: the impact comes before any step
+        seen: set = set()
+        while starting := [x for x in ev.start_triggers(hs, q, v) if x not in seen]:
+            seen.add(starting[0])  # a rejected trigger (a joint leaving) is not asked again
+            for tr in ev.handle(hs, starting[0], q, v, 0.0, integ.policy):
+                events.append(tr.event)
+                q, v = tr.q, tr.v
+                rec.add(0.0, q, v, tr.event.after)
+                after.append(len(rec) - 1)
+        if trace is not None:
+            trace.append((q.copy(), v.copy(), list(events)))
         while True:
             seg = None if trace is None else ev.SegmentTrace(
                 t, q.copy(), v.copy(), hs.p.copy(), dict(hs.locked), hs.zones, dict(hs.slip),

@@ -257,8 +257,13 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
         raise CmmError(f"sensitivities through a branch switch at a singular position "
                        f"(t = {switch.t_singular:.9g} s) are not defined: the branch taken "
                        "there is a discrete choice")
-    sp = SensitivityPass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
     q0, v0, start_events = trace[0]
+    impact = next((e for e in start_events if e.kind not in ("lock", "stick", "slip")), None)
+    if impact is not None:
+        raise CmmError(f"sensitivities of a run that starts with an impact are not available: "
+                       f"joint {impact.joint} starts on its {impact.side} stop moving into it "
+                       f"({impact.kind} at t = 0); start it off the stop or at rest")
+    sp = SensitivityPass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
     sq, sv = sp.start(q0, v0, start_events)
     sp.sq[0], sp.sv[0] = sq, sv
     n = 1
