@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shlex
 import shutil
 import subprocess
 import warnings
@@ -68,27 +69,65 @@ class Buffered:
 
 
 def cache_dir() -> Path:
-    """Where compiled libraries are kept: ``$CMM_DAE_CACHE`` (default ``~/.cache/cmm_dae``)."""
-    return Path(os.environ.get("CMM_DAE_CACHE", Path.home() / ".cache" / "cmm_dae"))
+    """Where compiled libraries are kept: ``$CMM_DAE_CACHE`` (default, also when it is set
+    but empty, ``~/.cache/cmm_dae``)."""
+    return Path(os.environ.get("CMM_DAE_CACHE") or Path.home() / ".cache" / "cmm_dae")
 
 
-def c_compiler() -> str | None:
-    """The system C compiler (``$CC``, ``cc`` or ``gcc``), None when there is none."""
-    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+def c_compiler() -> list[str] | None:
+    """The system C compiler as a command (``$CC``, split like a shell would, so that
+    ``CC="gcc -m64"`` works; else ``cc`` or ``gcc``), None when there is none."""
+    cc = os.environ.get("CC", "").strip()
+    if cc:
+        return shlex.split(cc)
+    found = shutil.which("cc") or shutil.which("gcc")
+    return [found] if found else None
+
+
+def _digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _stamp(lib: Path) -> Path:
+    """The file written beside a library once its build is complete: key, size, sha256."""
+    return lib.with_name(lib.name + ".ok")
+
+
+def verified(lib: Path, key: str) -> bool:
+    """True when ``lib`` is the complete library built under ``key``: its stamp names the
+    key, and its size and checksum are the ones written after the build. A library is
+    never loaded on its existence alone: a file cut short (a full disk, a killed build,
+    a copy) mapped into the process kills it (SIGBUS), and another model's library under
+    this name would compute another model."""
+    try:
+        words = _stamp(lib).read_text().split()
+        return (len(words) == 3 and words[0] == key and int(words[1]) == lib.stat().st_size
+                and words[2] == _digest(lib))
+    except (OSError, ValueError):
+        return False
 
 
 def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function] = (),
                   flags: tuple[str, ...] = ()) -> Path:
-    """A shared library ``cmm_<key>.so`` in :func:`cache_dir` built (unless already there)
-    from C ``sources`` and the CasADi-generated C of ``funcs``; ``flags`` go to the linker.
-    Raises OSError / subprocess.SubprocessError / RuntimeError when it cannot be built."""
+    """A shared library ``cmm_<key>.so`` in :func:`cache_dir` built (unless a verified one
+    is already there, see :func:`verified`) from C ``sources`` and the CasADi-generated C
+    of ``funcs``; ``flags`` go to the linker. A cached file that fails the check is
+    rebuilt with a one-line warning. Raises OSError / subprocess.SubprocessError /
+    RuntimeError when it cannot be built."""
     cc = c_compiler()
     if cc is None:
         raise OSError("no C compiler found (set CC or install cc/gcc)")
     cache = cache_dir()
     lib = cache / f"cmm_{key}.so"
     if lib.is_file():
-        return lib
+        if verified(lib, key):
+            return lib
+        warnings.warn(f"the cached library {lib} is incomplete, changed or not this "
+                      "model's (no matching size and checksum): rebuilding it", stacklevel=3)
     cache.mkdir(parents=True, exist_ok=True)
     files = [str(f) for f in sources or ()]
     generated = None
@@ -102,13 +141,20 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
         generated = Path(gen.generate(str(cache) + os.sep))
         files.append(str(generated))
     tmp = lib.with_suffix(f".{os.getpid()}.tmp")
+    stamp_tmp = lib.with_suffix(f".{os.getpid()}.ok.tmp")
     try:
-        subprocess.run([cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
+        subprocess.run([*cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
                        check=True, capture_output=True, timeout=600)
+        stamp_tmp.write_text(f"{key} {tmp.stat().st_size} {_digest(tmp)}\n")
+        # the stamp first, then the library, each atomic: a process that finds the
+        # library finds its stamp (parallel runs never load a half-written library)
+        stamp_tmp.replace(_stamp(lib))
+        tmp.replace(lib)
     finally:
         if generated is not None:
             generated.unlink(missing_ok=True)
-    tmp.replace(lib)  # atomic: parallel runs never load a half-written library
+        tmp.unlink(missing_ok=True)
+        stamp_tmp.unlink(missing_ok=True)
     return lib
 
 

@@ -86,3 +86,58 @@ def test_step_budget_keeps_partial_result():
     assert err.value.status is Status.STALLED
     part = err.value.result
     assert part is not None and 0.5 < part.t[-1] < 10.0
+
+
+_RUN = ("import cmm_dae as cd; r = cd.run_dae(cd.load(cd.example('pendulum_stop')), 0.5, "
+        "compiled=True); print(repr(float(r.joint('O').position[-1])), r.meta['compiled'])")
+
+
+@pytest.mark.timeout(600)
+def test_cut_or_foreign_cached_library_is_rebuilt(tmp_path):
+    """A library cut to half its size in the cache (SIGBUS before: Python died, rc 135) or
+    another library copied under its name is rebuilt with one warning line each, and the
+    run gives the same numbers; $CC with arguments is a command, not a file name."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    env = {**os.environ, "CMM_DAE_CACHE": str(tmp_path), "CC": f"{shutil.which('cc') or 'gcc'} -g0"}
+
+    def run():
+        return subprocess.run([sys.executable, "-W", "always", "-c", _RUN], env=env,
+                              capture_output=True, text=True, timeout=500)
+
+    first = run()
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.split()[1] == "True" and "rebuilding" not in first.stderr
+    libs = sorted(tmp_path.glob("cmm_*.so"))
+    # the driver, the model's functions and its configurations' event functions
+    driver, model = sorted(libs, key=lambda p: not p.name.startswith("cmm_seg_"))[:2]
+    size = driver.stat().st_size
+    with open(driver, "r+b") as f:
+        f.truncate(size // 2)
+    model.write_bytes(driver.read_bytes())  # another library under the model's name
+    second = run()
+    assert second.returncode == 0, second.stderr
+    assert second.stdout == first.stdout
+    assert second.stderr.count("incomplete, changed or not this model's") == 2
+    assert driver.stat().st_size == size
+    third = run()  # rebuilt and stamped: trusted now, quietly
+    assert third.returncode == 0 and third.stdout == first.stdout
+    assert "rebuilding" not in third.stderr
+
+
+def test_cache_and_compiler_settings(monkeypatch, tmp_path):
+    """An empty CMM_DAE_CACHE means the default folder, not the working directory."""
+    from pathlib import Path
+
+    from cmm_dae import buffers
+
+    monkeypatch.setenv("CMM_DAE_CACHE", "")
+    assert buffers.cache_dir() == Path.home() / ".cache" / "cmm_dae"
+    monkeypatch.setenv("CC", "  gcc -m64 -O1 ")
+    assert buffers.c_compiler() == ["gcc", "-m64", "-O1"]
+    lib = tmp_path / "cmm_x.so"
+    lib.write_bytes(b"\x7fELF" + bytes(100))
+    assert not buffers.verified(lib, "x")  # no stamp: never trusted
