@@ -4,7 +4,9 @@ like :class:`cmm_dae.Mechanism` (it is called while one is built)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from .errors import Problem
@@ -45,8 +47,48 @@ def _check_ref(m: Any, table: str, key: str, ref: str, out: list[Problem]) -> No
                            f"(its points: {', '.join(m.bodies[body].points) or 'none'})"))
 
 
+def _numbers(x: Any, key: str):
+    """(dotted key, value) of every number inside a description record: dataclass
+    fields, mappings, sequences (``[i]``); callables and strings are not numbers."""
+    if isinstance(x, bool) or x is None or isinstance(x, str) or callable(x):
+        return
+    if isinstance(x, int | float):
+        yield key, x
+    elif dataclasses.is_dataclass(x):
+        for f in dataclasses.fields(x):
+            yield from _numbers(getattr(x, f.name), f"{key}.{f.name}" if key else f.name)
+    elif isinstance(x, Mapping):
+        for k, v in x.items():
+            yield from _numbers(v, f"{key}.{k}" if key else str(k))
+    elif isinstance(x, tuple | list):
+        for i, v in enumerate(x):
+            yield from _numbers(v, f"{key}[{i}]")
+    else:
+        try:  # a numpy scalar
+            yield key, float(x)
+        except (TypeError, ValueError):
+            return
+
+
+def non_finite(m: Any) -> list[Problem]:
+    """Every NaN or infinite number of a mechanism, by table and key: the one check that
+    every way into a Mechanism passes (the file loader, ``with_params``, sweeps, Python
+    builders). A NaN stop compared False everywhere and was silently dropped."""
+    out: list[Problem] = []
+    tables = [("mechanism", "gravity", m.gravity), ("ground", "", m.ground),
+              ("initial", "", m.initial)]
+    for kind in ("bodies", "joints", "drivers", "loads", "elements"):
+        tables += [(f"{kind}.{name}", "", rec) for name, rec in getattr(m, kind).items()]
+    for table, key, rec in tables:
+        for k, val in _numbers(rec, key):
+            if not math.isfinite(val):
+                out.append(Problem(table, k, f"expected a finite number, got {val}"))
+    return out
+
+
 def validate(m: Any) -> list[Problem]:
-    """All semantic problems of a mechanism (empty list when it is sound)."""
+    """All semantic problems of a mechanism (empty list when it is sound): the checks of
+    each table, and every non-finite number (:func:`non_finite`) they did not report."""
     out: list[Problem] = []
     if not all(_finite(g) for g in m.gravity):
         out.append(Problem("mechanism", "gravity", f"expected two finite numbers, got {m.gravity}"))
@@ -130,7 +172,8 @@ def validate(m: Any) -> list[Problem]:
         if not _finite(el.preload):
             out.append(Problem(t, "preload", f"expected a finite number, got {el.preload}"))
     _check_initial(m, out)
-    return out
+    said = {(p.table, p.key.split("[")[0]) for p in out}
+    return out + [p for p in non_finite(m) if (p.table, p.key.split("[")[0]) not in said]
 
 
 def _check_law(t: str, law: Any, target: str) -> list[Problem]:

@@ -14,7 +14,12 @@ This is the only module that imports scikit-sundae.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import math
+import re
+import sys
 import warnings
 
 import casadi as ca
@@ -61,8 +66,60 @@ def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
     return grid
 
 
+_LOG = logging.getLogger("cmm_dae.ida")
+_SUNDIALS_LINE = re.compile(r"^\[\w+, Error: -?\d+\]")
+
+
+class _SundialsOut(io.TextIOBase):
+    """Standard output while IDA runs: scikit-sundae prints SUNDIALS' failure messages
+    (``[IDAHandleFailure, Error: -4] ...``, about 20 in an A02 run that succeeds) with
+    ``print``; those lines go to the logger ``cmm_dae.ida`` at debug level, every other
+    line (a user's load law printing) to the real standard output."""
+
+    def __init__(self, out):
+        self.out, self.part = out, ""
+
+    def write(self, text: str) -> int:
+        lines = (self.part + text).split("\n")
+        self.part = lines.pop()
+        for line in lines:
+            if _SUNDIALS_LINE.match(line):
+                _LOG.debug("%s", line)
+            elif line and self.out is not None:
+                self.out.write(line + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        if self.part and not _SUNDIALS_LINE.match(self.part) and self.out is not None:
+            self.out.write(self.part)
+        self.part = ""
+
+
+@contextlib.contextmanager
+def quiet_sundials():
+    """A context in which SUNDIALS' own messages go to the logger, not to stdout."""
+    out = _SundialsOut(sys.stdout)
+    try:
+        with contextlib.redirect_stdout(out):
+            yield
+    finally:
+        out.flush()
+
+
 class _StalledError(Exception):
     """Raised inside the root function when the run's step budget is spent."""
+
+
+class _CrawlError(Exception):
+    """Raised inside the root function when IDA's steps no longer move t."""
+
+
+#: Consecutive IDA steps that leave t where it was (steps below its round-off) after which
+#: the segment ends as a failure at that state. Next to a singular position IDA halved its
+#: step below t's spacing and then took about a million steps in place (A02 at rtol 1e-10
+#: from t0 = 0, where a step floor relative to t0 is zero); whether that happened hung on
+#: round-off, and it ran for an hour. The failure goes to the crossing like any other.
+IN_PLACE_STEPS = 50
 
 
 class IdaIntegrator(Integrator):
@@ -155,8 +212,13 @@ class IdaIntegrator(Integrator):
     def _events(self, t, y, yp, out):
         # IDA checks the roots after every successful step (at the step's end, or at the
         # output time when the step passed it): count steps here.
-        if t > self.t_last and t not in self.outputs:
-            self.t_last = t
+        if t >= self.t_last and t not in self.outputs:
+            if t > self.t_last:
+                self.t_last, self.in_place = t, 0
+            else:  # a step too short to move t: IDA halving next to a singular position
+                self.in_place += 1
+                if self.in_place > IN_PLACE_STEPS:
+                    raise _CrawlError
             self.n_steps += 1
             if self.n_steps > self.step_budget:
                 raise _StalledError
@@ -259,9 +321,9 @@ class IdaIntegrator(Integrator):
         self.ev_fn.bind(0, self.y_in)
         self.ev_fn.bind_out(0, self.ev_out)
         self.ev_fn.bind_out(1, self.ev_near)
-        self.n_steps = 0
+        self.n_steps = self.in_place = 0
         self.t_last = -math.inf
-        self.interrupted = self.stalled = False
+        self.interrupted = self.stalled = self.crawled = False
         self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
         # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
@@ -297,6 +359,8 @@ class IdaIntegrator(Integrator):
                 self.interrupted = True
             except _StalledError:
                 self.stalled = self.interrupted = True
+            except _CrawlError:
+                self.crawled = self.interrupted = True
             except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
                 self.error, self.t_error = e, self.t_last
             if self.interrupted or self.error is not None:
@@ -321,7 +385,9 @@ class IdaIntegrator(Integrator):
             warnings.simplefilter("ignore", UserWarning)
             solver = None if self.c is not None else sun.ida.IDA(
                 resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
-                rtol=opts.rtol, atol=self.atol, max_num_steps=opts.max_steps,
+                # IDA's limit per call: what is left of the run's budget, which the root
+                # function counts across calls and ends cleanly ("stalled")
+                rtol=opts.rtol, atol=self.atol, max_num_steps=max(1, self.step_budget + 1),
                 first_step=first_step, min_step=self.min_step,
                 max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
                 algebraic_idx=list(range(2 * u.nz, u.N)),
@@ -343,7 +409,8 @@ class IdaIntegrator(Integrator):
             if self.c is not None:
                 r = self._solve_compiled(tspan, y0, yp0, first_step)
             else:
-                r = solver.solve(tspan, y0, yp0)
+                with quiet_sundials():
+                    r = solver.solve(tspan, y0, yp0)
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
@@ -353,8 +420,9 @@ class IdaIntegrator(Integrator):
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
         T, Y = np.asarray(r.t), np.asarray(r.y)
+        failed = r.status < 0 or self.crawled  # steps in place are a failure there
         h1 = self._first_step(y0, yp0, t_stop - t0) \
-            if r.status < 0 and self.error is None and not first_step else 0.0
+            if failed and self.error is None and not first_step else 0.0
         if h1 > 0.0 and T[-1] - t0 < h1:
             # IDA's own first step comes from y' and the tolerances alone: on Andrews'
             # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
@@ -364,12 +432,12 @@ class IdaIntegrator(Integrator):
             # step from the accelerations is covered: again with that first step.
             self.first_step = h1
             return self.advance(t0, q, v, rec)
-        if r.status < 0 and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
+        if failed and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
             # IDA cannot restart where a singular-position crossing ended, even with a first
             # step from the accelerations: still too near it; the policy takes the
             # crossing further out
             return SegmentEnd(t0, q, v, (), "singular")
-        if r.status < 0 and self.error is None and not self.relaxed and (
+        if failed and self.error is None and not self.relaxed and (
                 T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
             # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
             # on a non-parallelogram A02 at rtol 1e-12): large or near-singular constraint
@@ -394,7 +462,7 @@ class IdaIntegrator(Integrator):
             raise SolverError(f"the integration failed after t = "
                               f"{self.t_error:.9g} s: "
                               f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
-        if r.status < 0:
+        if failed:
             self.v_fail = v1
             message, status, ratio = self._failure(r, t1, q1)
             if status is Status.DEAD_POINT or (
@@ -470,5 +538,6 @@ class IdaIntegrator(Integrator):
             what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
                     "tolerances may be too tight or the forces too stiff)")
             status = Status.INTEGRATOR
-        return (f"{what}; configuration '{cfg}'; IDA: {r.message} (status {r.status})", status,
-                ratio)
+        ida = (f"{IN_PLACE_STEPS} steps too short to move t" if self.crawled
+               else f"{r.message} (status {r.status})")
+        return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio

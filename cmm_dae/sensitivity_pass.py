@@ -14,6 +14,7 @@ from .assembly import start_spec
 from .equations import Buffered, Model
 from .errors import SolverError, Status
 from .hybrid import SegmentTrace
+from .ida import quiet_sundials
 from .kinematics import project_state
 from .result import Result
 from .sensitivity_crossing import CrossingPass
@@ -285,7 +286,8 @@ class SensitivityPass(CrossingPass):
                                             for i in range(P)])
             solver = sun.ida.IDA(resfn, jacfn=jacfn, rtol=self.rtol, atol=atol,
                                  algebraic_idx=alg, max_num_steps=10**7)
-            r = solver.solve(tspan, Y0, Yp0)
+            with quiet_sundials():
+                r = solver.solve(tspan, Y0, Yp0)
             self.nfev += int(r.nfev)
             if r.status >= 0 or not control:
                 break

@@ -85,14 +85,16 @@ def test_step_budget_keeps_partial_result():
         cd.run_dae(mech, 10.0, compiled=True, max_steps=300)
     assert err.value.status is Status.STALLED
     part = err.value.result
-    assert part is not None and 0.5 < part.t[-1] < 10.0
+    # the budget counts every step; the compiled segment checks it after each output
+    # interval (a few steps of 0.01 s here), and keeps the samples so far
+    assert part is not None and 0.0 < part.t[-1] < 10.0 and 300 < part.stats.steps < 400
+    assert part.status == "stalled" and np.all(np.diff(part.t) >= 0.0)
 
 
 _RUN = ("import cmm_dae as cd; r = cd.run_dae(cd.load(cd.example('pendulum_stop')), 0.5, "
         "compiled=True); print(repr(float(r.joint('O').position[-1])), r.meta['compiled'])")
 
 
-@pytest.mark.timeout(600)
 def test_cut_or_foreign_cached_library_is_rebuilt(tmp_path):
     """A library cut to half its size in the cache (SIGBUS before: Python died, rc 135) or
     another library copied under its name is rebuilt with one warning line each, and the

@@ -17,8 +17,6 @@ from hypothesis import strategies as st
 
 import cmm_dae as cd
 
-pytestmark = pytest.mark.timeout(300)
-
 
 def pendulum(L: float, th0: float, w0: float, e: float = 0.0, torque: float = 0.0):
     with open(cd.example("pendulum_stop"), "rb") as f:
