@@ -39,11 +39,40 @@ def _summary(res) -> None:
         print(res.event_table())
 
 
-def _save(res, args) -> None:
+def _refuse_overwrite(paths, force: bool) -> None:
+    """The one overwrite policy of every command: files the command would write that
+    exist already are refused up front, before anything is computed, unless --force."""
+    there = [str(p) for p in paths if p is not None and Path(p).exists()]
+    if there and not force:
+        raise CmmError(f"would overwrite {', '.join(there)}; pass --force to replace "
+                       f"{'it' if len(there) == 1 else 'them'} or choose another path")
+
+
+def _save(res, args) -> list[str]:
+    """Write --csv and --save (a failed or interrupted run's partial Result too); the
+    lines to print. Written before anything is printed: with stdout closed
+    (``| head -1``) the files still come."""
+    done = []
     if getattr(args, "csv", None):
-        print(f"wrote {res.to_csv(args.csv)}")
+        done.append(f"wrote {res.to_csv(args.csv)}")
     if getattr(args, "save", None):
-        print(f"wrote {res.save(args.save)}")
+        done.append(f"wrote {res.save(args.save)}")
+    return done
+
+
+def _finish(res, args) -> int:
+    """Save, then summarise a run of ``run`` / ``iterate``; exit code 0, or 3 (failed
+    part-way) / 130 (interrupted) with what was computed saved all the same."""
+    written = _save(res, args)
+    if not res.success:
+        print(f"cmm-dae: {res.message} (status: {res.status}); the result up to t = "
+              f"{res.t[-1]:.9g} s" + (" is saved" if written else " is kept in memory "
+                                      "only: give --save or --csv to keep it"),
+              file=sys.stderr)
+    _summary(res)
+    for line in written:
+        print(line)
+    return 0 if res.success else (130 if res.status == "interrupted" else 3)
 
 
 def _branch(text: str) -> str | tuple[str, int]:
@@ -61,22 +90,20 @@ def _branch(text: str) -> str | tuple[str, int]:
 def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
+    _refuse_overwrite((args.csv, args.save), args.force)
     res = simulate(_load(args.model), args.t_end, method="ida", rtol=args.rtol, atol=args.atol,
                    output_dt=args.output_dt, progress=args.progress, compiled=args.compiled,
-                   linsolver=args.linsolver, branch=args.branch)
-    _summary(res)
-    _save(res, args)
-    return 0
+                   linsolver=args.linsolver, branch=args.branch, throw=False)
+    return _finish(res, args)
 
 
 def _iterate(args: argparse.Namespace) -> int:
     from . import simulate
 
+    _refuse_overwrite((args.csv, args.save), args.force)
     res = simulate(_load(args.model), args.t_end, method="iterative", dt=args.dt,
-                   progress=args.progress)
-    _summary(res)
-    _save(res, args)
-    return 0
+                   progress=args.progress, throw=False)
+    return _finish(res, args)
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -84,6 +111,8 @@ def _compare(args: argparse.Namespace) -> int:
     from .plots import work_precision as wp_plot
     from .studies import work_precision
 
+    out = Path(args.out)
+    _refuse_overwrite([out / "report.md", out / "report.html"], args.force)
     mech = _load(args.model)
     model = Model(mech)
     runs = {"IDA": dict(method="ida", rtol=args.rtol, atol=args.rtol * 1e-2,
@@ -97,7 +126,6 @@ def _compare(args: argparse.Namespace) -> int:
                          f"{r.message}; the comparison covers what both runs reached")
         res.append(r)
     cmp = compare(*res)
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.no_work_precision:
         pass
@@ -154,6 +182,7 @@ def _structure(args: argparse.Namespace) -> int:
 def _animate(args: argparse.Namespace) -> int:
     from .animation import animate
 
+    _refuse_overwrite([args.out], args.force)
     res = _result_of(args.source, args.t_end)
     print(f"wrote {animate(res, args.out, fps=args.fps, max_frames=args.frames)}")
     return 0
@@ -162,8 +191,9 @@ def _animate(args: argparse.Namespace) -> int:
 def _plot(args: argparse.Namespace) -> int:
     from . import plots
 
-    res = _result_of(args.source, args.t_end)
     out = Path(args.out)
+    _refuse_overwrite(sorted(out.glob("*.png")) if out.is_dir() else [], args.force)
+    res = _result_of(args.source, args.t_end)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     if res.meta["drivers"]:
@@ -256,6 +286,9 @@ def _design(args: argparse.Namespace) -> int:
 
     spec = design_spec(args.spec)
     out = Path(args.out) if args.out else spec.pop("out")
+    # refused before the optimisation (tens of seconds), not after it
+    _refuse_overwrite([out / n for n in ("summary.md", "effort.png", "history.png",
+                                         "optimised.toml")], args.force)
     try:
         d = spec.pop("run_design")()
     except DesignError as e:
@@ -287,6 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--output-dt", type=float, default=0.01, help="output spacing, s (0.01)")
     r.add_argument("--csv", help="write every series to this CSV file")
     r.add_argument("--save", help="save the Result to this .npz file")
+    r.add_argument("--force", action="store_true", help="overwrite --csv / --save files")
     r.add_argument("--compiled", action="store_true",
                    help="run IDA's segments in C (needs a C compiler; built once, cached)")
     r.add_argument("--linsolver", choices=("auto", "dense", "sparse"), default="auto",
@@ -302,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--dt", type=float, default=0.01, help="fixed step, s (0.01, as the paper)")
     i.add_argument("--csv", help="write every series to this CSV file")
     i.add_argument("--save", help="save the Result to this .npz file")
+    i.add_argument("--force", action="store_true", help="overwrite --csv / --save files")
     i.set_defaults(func=_iterate)
 
     c = sub.add_parser("compare", help="IDA vs the iterative algorithm: report with figures")
@@ -311,6 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="directory for report.md/.html and PNGs")
     c.add_argument("--no-work-precision", action="store_true",
                    help="skip the work-precision sweep (a few seconds)")
+    c.add_argument("--force", action="store_true", help="overwrite an existing report")
     c.set_defaults(func=_compare)
 
     e = sub.add_parser("events", help="event table of a model run or of a saved result")
@@ -328,12 +364,14 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     a.add_argument("--fps", type=int, default=20, help="frames per second (20)")
     a.add_argument("--frames", type=int, default=120, help="most frames (120)")
+    a.add_argument("--force", action="store_true", help="overwrite an existing file")
     a.set_defaults(func=_animate)
 
     p = sub.add_parser("plot", help="paper-style figures of one run")
     p.add_argument("source", help="model file or example name, or a saved result (.npz)")
     p.add_argument("--out", required=True, help="directory for the PNGs")
     p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    p.add_argument("--force", action="store_true", help="overwrite existing PNGs")
     p.set_defaults(func=_plot)
     sw = sub.add_parser("sweep", help="parameter sweep (local processes or a Dask cluster)")
     sw.add_argument("model", help="model file or example name")

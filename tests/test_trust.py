@@ -79,3 +79,69 @@ def test_a02_steps_in_place_hand_over_to_the_crossing(caplog):
     assert res.stats.steps < 20_000 and res.stats.nfev < 100_000
     assert np.all(np.diff(res.t) > 0.0)
     assert any("Error: -" in r.getMessage() for r in caplog.records)
+
+
+# ------------------------------------------------------------------ the command line
+def _cli(*args, cwd):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "cmm_dae.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=200)
+
+
+def _lock_up_model(tmp_path):
+    """The slider-crank with a stop on its driven slider's rail: lock-up at t = 0.856 s."""
+    text = cd.example("slider_crank").read_text().replace(
+        'axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nlimits = { upper = 0.245 }')
+    (tmp_path / "l.toml").write_text(text)
+    return str(tmp_path / "l.toml")
+
+
+@pytest.mark.parametrize("command", ["run", "iterate"])
+def test_cli_saves_the_partial_result_of_a_failed_run(tmp_path, command):
+    model = _lock_up_model(tmp_path)
+    r = _cli(command, model, "--t-end", "2", "--save", "p.npz", "--csv", "p.csv",
+             cwd=tmp_path)
+    assert r.returncode == 3
+    assert "lock-up" in r.stderr and "is saved" in r.stderr
+    part = cd.load_result(tmp_path / "p.npz")
+    assert part.status == "lock-up" and 0.85 < part.t[-1] < 0.87
+    rows = (tmp_path / "p.csv").read_text().splitlines()
+    assert len(rows) == part.t.size + 1  # a header and every sample
+
+
+def test_cli_saves_with_stdout_closed(tmp_path):
+    """``cmm-dae run ... --save x | head -1``: the reader leaves after one line; the file
+    is written all the same (it was skipped)."""
+    import subprocess
+    import sys
+
+    cmd = (f"{sys.executable} -m cmm_dae.cli run pendulum_stop --t-end 0.5 --save s.npz "
+           "| head -1")
+    subprocess.run(cmd, shell=True, cwd=tmp_path, timeout=200, check=True,
+                   capture_output=True)
+    assert cd.load_result(tmp_path / "s.npz").t[-1] == pytest.approx(0.5, abs=1e-12)
+
+
+@pytest.mark.parametrize("args,target", [
+    (["run", "pendulum_stop", "--t-end", "0.1", "--save", "x.npz"], "x.npz"),
+    (["run", "pendulum_stop", "--t-end", "0.1", "--csv", "x.csv"], "x.csv"),
+    (["iterate", "pendulum_stop", "--t-end", "0.1", "--save", "x.npz"], "x.npz"),
+    (["animate", "pendulum_stop", "--t-end", "0.1", "--out", "x.gif"], "x.gif"),
+    (["compare", "pendulum_stop", "--t-end", "0.1", "--out", "rep"], "rep/report.md"),
+    (["plot", "pendulum_stop", "--t-end", "0.1", "--out", "rep"], "rep/joints.png"),
+])
+def test_cli_refuses_to_overwrite_up_front(tmp_path, args, target):
+    """One policy: a file the command would write that exists is refused before anything
+    is computed (exit 2, the file intact), and replaced with --force."""
+    path = tmp_path / target
+    path.parent.mkdir(exist_ok=True)
+    path.write_bytes(b"the user's own file")
+    r = _cli(*args, cwd=tmp_path)
+    assert r.returncode == 2
+    assert f"would overwrite {target}" in r.stderr and "--force" in r.stderr
+    assert path.read_bytes() == b"the user's own file"
+    r = _cli(*args, "--force", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert path.read_bytes() != b"the user's own file"
