@@ -224,9 +224,11 @@ SPEC: dict[str, Table] = {
                       "has free DOF; the others are assembled", _COORD, default={}),
         "velocities": Key("map", "rates of the coordinates named in `joints` (default 0)",
                           _RATE, default={}),
-        "equilibrium": Key("paths", "\"position\" (solve the coordinates in `joints` so the "
-                           "mechanism starts at rest in equilibrium) or a list of parameter "
-                           "paths (e.g. \"joints.D.spring.rest\") solved for that",
+        "equilibrium": Key("paths", "\"position\" (solve the coordinates in `joints`) or a "
+                           "list of parameter paths (e.g. \"joints.D.spring.rest\"), as "
+                           "many as the free motion's degrees of freedom, solved so that the "
+                           "free motion does not accelerate at the start (at rest: no "
+                           "generalized force on it, a static analysis)",
                            default=[]),
     }, example='[initial]\njoints = { A = 3.141592653589793, E = 0.22773 }\n'
        'velocities = { E = 0.0 }'),

@@ -290,22 +290,46 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
                         "): the joint forces and torques are minimum-norm reactions; "
                         "their derivatives are not given (NaN)")
     if solved:
-        ev_t, data = _through_equilibrium(model, ev_t, data, len(paths))
+        ev_t, data = _through_equilibrium(sp, res, ev_t, data, len(paths))
     return Sensitivities(res, paths, model.theta0[:len(paths)].copy(), ev_t, data,
                          time.perf_counter() - wall0, sp.notes)
 
 
-def _through_equilibrium(model: Model, ev_t: np.ndarray, data: dict[str, np.ndarray],
-                         n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def _through_equilibrium(sp: SensitivityPass, res: Result, ev_t: np.ndarray,
+                         data: dict[str, np.ndarray], n: int
+                         ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Total derivatives with respect to the first ``n`` parameters when the others were
-    solved by the equilibrium start: those make the named joints' accelerations at t = 0
-    vanish, so (implicit function theorem) d solved / d p = -(d acc / d solved)^-1
-    (d acc / d p), both read from the start sample's own sensitivities."""
-    mech = model.mech
-    known = [model.jidx[k] for k in mech.initial.joints if k not in mech.drivers]
-    J = data["cdd"][0][known]  # (coordinates, all parameters)
+    solved by the equilibrium start (:mod:`cmm_dae.equilibrium`): those make r = N^T a
+    vanish at t = 0, the accelerations along an orthonormal basis N of the free motion
+    (the null space of the constraint Jacobian J). Implicit function theorem: d solved /
+    d p = -(dr / d solved)^-1 (dr / d p), with dr = N^T (dP a + P da) for the projector
+    P = N N^T; at the solution P a = 0, so dP a = -P dJ^T (J J^T)^-1 J a. da comes from the
+    start sample's own sensitivities; dJ (J's change with the start positions and the
+    parameters) from central differences of J along each parameter's direction."""
+    from scipy.linalg import null_space
+
+    model = sp.model
+    q0, v0 = res.data["q"][0], res.data["v"][0]
+    p0 = sp.params[0] if sp.params[0] is not None else model.params()
+    act = model.active_rows(p0)
+    a0, _, _ = model.kkt(q0, v0, 0.0, p0)
+    J = sp.eq.pos(q0, 0.0, p0, sp.th)[1][act]
+    N = null_space(J)
+    P = N @ N.T
+    mu = np.linalg.lstsq(J @ J.T, J @ a0, rcond=None)[0]  # (J J^T)^-1 J a
+    sq0, da0 = data["q"][0], data["a"][0]
+    dr = np.zeros((N.shape[1], sq0.shape[1]))
+    for k in range(sq0.shape[1]):
+        # a relative step at which the central difference's truncation (h^2) and
+        # round-off (eps / h) errors balance for J of order one
+        h = 1e-5 * max(1.0, abs(float(sp.th[k])))
+        e = np.zeros_like(sp.th)
+        e[k] = h
+        dJ = (sp.eq.pos(q0 + h * sq0[:, k], 0.0, p0, sp.th + e)[1][act]
+              - sp.eq.pos(q0 - h * sq0[:, k], 0.0, p0, sp.th - e)[1][act]) / (2.0 * h)
+        dr[:, k] = N.T @ (-P @ (dJ.T @ mu) + P @ da0[:, k])
     try:
-        d_solved = -np.linalg.solve(J[:, n:], J[:, :n])
+        d_solved = -np.linalg.solve(dr[:, n:], dr[:, :n])
     except np.linalg.LinAlgError:
         raise CmmError("the equilibrium start is singular in its solved parameters: its "
                        "sensitivities are not defined") from None

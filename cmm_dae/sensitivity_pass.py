@@ -394,6 +394,7 @@ class SensitivityPass(CrossingPass):
         n, nq, P = res.t.size, model.nq, self.P
         nj, nd = len(model.joint_names), len(model.driver_names)
         out = np.zeros((n, eq.n_out, P))
+        acc = np.zeros((n, nq, P))
         for i in range(n):
             p = self.params[i]
             if p is None:
@@ -403,6 +404,7 @@ class SensitivityPass(CrossingPass):
             a, lam, dz, _ = self.kkt_d(q, v, t, p, dP, sq, sv)
             _, O_q, O_v, O_a, O_th, O_l = eq.out(q, v, a, p, self.th, lam)
             out[i] = O_q @ sq + O_v @ sv + O_a @ dz[:nq] + O_l @ dz[nq:] + O_th
+            acc[i] = dz[:nq]
         o = 0
         d = {}
         for key, w in (("c", nj), ("cd", nj), ("cdd", nj), ("jforce", 2 * nj),
@@ -410,7 +412,7 @@ class SensitivityPass(CrossingPass):
             d[key] = out[:, o:o + w]
             o += w
         d["jforce"] = d["jforce"].reshape(n, nj, 2, P)
-        d["q"], d["v"] = self.sq, self.sv
+        d["q"], d["v"], d["a"] = self.sq, self.sv, acc
         return d
 
 

@@ -50,10 +50,40 @@ def test_double_folded_start_up_jump_removed():
         d = r.joint("D").position[early]
         return float(np.max(np.abs(d - d[0])))
 
-    assert jump(plain) > 0.05 and jump(pre) < 0.002
-    assert abs(pre.joint("E").acceleration[0]) <= 1e-9
+    # the static analysis leaves a smooth drift (measured 3.7e-5 rad); zeroing the named
+    # coordinate's acceleration instead left a 9.2e-4 rad swing
+    assert jump(plain) > 0.05 and jump(pre) < 1e-4
     assert abs(plain.joint("E").acceleration[0]) > 1.0
     assert [e.kind for e in pre.events] == ["limit"]
+
+
+def test_static_analysis_does_not_depend_on_the_named_coordinate():
+    """The preloaded double-folded mechanism started from the same state, named by E (the
+    file) or by D: the same spring rest, and no acceleration along the free motion."""
+    from scipy.linalg import null_space
+
+    from cmm_dae.assembly import start_state
+    from cmm_dae.events import HybridState
+
+    by_e = cd.load(MODELS / "double_folded_preloaded.toml")
+    first = cd.run_dae(by_e, 0.01)
+    d0 = float(first.joint("D").position[0])
+    by_d = by_e.replace(initial=cd.Initial({"D": d0}, {"D": 0.0},
+                                           ["joints.D.spring.rest"]))
+    second = cd.run_dae(by_d, 0.01)
+    rest_e = first.meta["equilibrium"]["joints.D.spring.rest"]
+    rest_d = second.meta["equilibrium"]["joints.D.spring.rest"]
+    assert rest_d == pytest.approx(rest_e, abs=1e-10)
+    solved = cd.with_params(by_e.replace(initial=cd.Initial({"E": 0.17763}, {"D": 0.0})),
+                            {"joints.D.spring.rest": rest_e})
+    model = cd.Model(solved)
+    hs = HybridState(model)
+    q, v, _ = start_state(model, hs)
+    a, _, _ = model.kkt(q, v, 0.0, hs.p)
+    N = null_space(model.constraints(q, 0.0, hs.p).Phi_q[model.active_rows(hs.p)])
+    # the free motion does not accelerate at the start (at rest this is N^T Q = 0, the
+    # static analysis: the sprung rod's closed form above)
+    assert N.shape[1] == 1 and abs(float(N[:, 0] @ a)) <= 1e-10
 
 
 def test_bad_equilibrium_requests():

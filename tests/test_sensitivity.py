@@ -206,8 +206,9 @@ def test_through_the_equilibrium_start():
     include how that rest moves with the parameters (each difference run solves it
     again). Compared on the series over the first 0.5 s, before any event."""
     mech = cd.load(MODELS / "double_folded_preloaded.toml")
-    # both move the solved rest (link 3's weight loads D's spring)
-    params = ["joints.D.spring.stiffness", "bodies.link3.mass"]
+    # all move the solved rest (link 3's weight loads D's spring; the crank's length moves
+    # the start positions and the constraint Jacobian)
+    params = ["joints.D.spring.stiffness", "bodies.link3.mass", "bodies.crank.points.B.x"]
     s = cd.sensitivities(mech, params, 0.5, rtol=1e-11, atol=1e-13)
     res = s.result
     grid = res.t[res.t > 0.05]
