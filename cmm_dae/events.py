@@ -281,8 +281,20 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     before = hs.current()
     c, cd = model.joint_rates(q, v)
     slip = {j: s for j, s in hs.slip.items() if j != joint}
-    hs.stick_at[joint] = float(c[k])
     trial = {**hs.locked, joint: "stick"}
+    hs.stick_at[joint] = float(c[k])
+    if over_constrained(hs, trial, q, t):
+        # the drivers (and locks) fix this joint's motion: it cannot stick of its own (a
+        # press's slide at its dead centre, whose rate only passes zero); it goes on
+        # slipping the way the drivers move it, the friction reversed with its rate
+        acc, _ = joint_acceleration(hs, q, v, t, joint, hs.locked)
+        s = 1 if acc > 0.0 else -1 if acc < 0.0 else -hs.slip.get(joint, 1)
+        hs.stick_at.pop(joint, None)
+        hs.slip = {**slip, joint: s}
+        return Transition(Event(t, "slip", joint, "positive" if s > 0 else "negative",
+                                before, hs.current(), float(cd[k]), float(cd[k]), {}, 0.0,
+                                0.0, "", "the drivers move this joint through rest: the "
+                                "friction reverses with its rate"), q, v)
     p = hs.params_of(trial, slip=slip)
     v0, imp = v, np.zeros(model.m)
     if cd[k] != 0.0:
