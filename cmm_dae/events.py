@@ -385,7 +385,9 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     v_plus, imp = impact_map(model, q, v, t, p_locked, row, -e * cdm)
     cdp = -e * cdm
     bounce = e > 0 and abs(cdp) > policy.v_lock and \
-        not zeno(hs.bounces.get(joint, []), t, e, policy.resolution)
+        not zeno(hs.bounces.get(joint, []), t, e, policy.resolution) and \
+        _rise(hs, q, v_plus, t, joint, side, cdp) > \
+        policy.gap[0] * abs(hs.limit_value(joint, side)) + policy.gap[1]
     if not bounce:
         v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
         cdp = 0.0
@@ -405,6 +407,15 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         if force < 0.0:  # the stop would have to pull at once: no chattering
             out.append(Transition(release(hs, q, v_plus, t, joint, force), q, v_plus))
     return out
+
+
+def _rise(hs: HybridState, q: np.ndarray, v_plus: np.ndarray, t: float, joint: str,
+          side: str, rate: float) -> float:
+    """How far a rebound at ``rate`` would rise off its stop, m or rad: rate^2 / 2|a| under
+    the joint's free acceleration back into the stop (inf when it does not come back)."""
+    acc, _ = joint_acceleration(hs, q, v_plus, t, joint, hs.locked)
+    back = acc if side == "upper" else -acc
+    return 0.5 * rate * rate / back if back > 0.0 else math.inf
 
 
 def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,

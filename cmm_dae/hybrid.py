@@ -54,10 +54,17 @@ class Policy:
         Shortest time between two events the integrator resolves, s: :data:`ZENO_DT` for
         IDA, the step for the fixed-step algorithm. Bounces that accumulate (Zeno) come to
         rest when they reach it (see :func:`zeno`).
+    gap : (float, float)
+        Smallest gap to a stop at L the integrator resolves is ``gap[0] |L| + gap[1]``, m
+        or rad (IDA: its tolerances on positions): a rebound whose flight would
+        rise less off the stop locks.
     """
 
     v_lock: float = 1e-6
     resolution: float = ZENO_DT
+    #: Smallest gap the integrator tells from its own error, (relative to the stop's
+    #: position, absolute m or rad): a rebound that would rise less off its stop locks.
+    gap: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)

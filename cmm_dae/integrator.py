@@ -151,13 +151,21 @@ class Integrator(ABC):
 
     def __init__(self, model: Model, hs: HybridState, opts: RunOptions, stats: Stats):
         self.model, self.hs, self.opts, self.stats = model, hs, opts, stats
-        self.policy = Policy(opts.v_lock, resolution=self.time_resolution(opts))
+        self.policy = Policy(opts.v_lock, resolution=self.time_resolution(opts),
+                             gap=self.gap_resolution(opts))
 
     @staticmethod
     @abstractmethod
     def time_resolution(opts: RunOptions) -> float:
         """Shortest time between two events this method resolves, s (the event policy's
         Zeno rule ends bounces that reach it)."""
+
+    @staticmethod
+    def gap_resolution(opts: RunOptions) -> tuple[float, float]:
+        """Smallest gap to a stop at L this method tells from its own error, as (relative
+        to |L|, absolute) in m or rad: the event policy locks a rebound that would rise
+        less (default: no such rule)."""
+        return 0.0, 0.0
 
     def output_times(self, t0: float, t1: float) -> np.ndarray:
         """The output grid's times strictly inside (t0, t1), s: the samples a crossing of
