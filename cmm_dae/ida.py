@@ -114,6 +114,15 @@ class _CrawlError(Exception):
     """Raised inside the root function when IDA's steps no longer move t."""
 
 
+#: Smallest absolute tolerance of positions and velocities, relative to the largest of
+#: each at a segment's start (10 units of round-off): IDA's Newton iteration cannot meet
+#: a tolerance below the round-off of the state it solves for.
+ROUNDOFF_ATOL = 10.0 * np.finfo(float).eps
+
+#: Factor by which the round-off floor must exceed a segment's absolute tolerance for an
+#: IDA failure to count as the state having outgrown it (see ``_roundoff_atol``).
+OUTGROWN = 100.0
+
 #: Consecutive IDA steps that leave t where it was (steps below its round-off) after which
 #: the segment ends as a failure at that state. Next to a singular position IDA halved its
 #: step below t's spacing and then took about a million steps in place (A02 at rtol 1e-10
@@ -339,6 +348,7 @@ class IdaIntegrator(Integrator):
         a, lam, _ = model.kkt(q, v, t0, self.p)
         self.ratio0 = singular_ratio(model, q, t0, self.p)
         y0, yp0 = u.start(q, v, a, lam)
+        self._roundoff_atol(y0)
         ne = 1 + len(self.triggers)
         # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
         # failure next to a singular position halved its step down to 1e-17 s and then
@@ -470,6 +480,13 @@ class IdaIntegrator(Integrator):
             raise SolverError(f"the integration failed after t = "
                               f"{self.t_error:.9g} s: "
                               f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
+        if failed and self.error is None and T[-1] > t0 and \
+                self._roundoff_atol(Y[-1], check=True):
+            # the coordinates grew until their round-off passes the absolute tolerance (the
+            # squeezer from rest to 1400 rad/s: at rtol 1e-12, atol 1e-14 on a velocity
+            # through zero is below 3e-13 of round-off; Newton could not converge, the step
+            # collapsed to 1e-22 s and it read as a dead point): on from here with it raised
+            return SegmentEnd(t1, q1, v1, (), "restart")
         if failed:
             self.v_fail = v1
             message, status, ratio = self._failure(r, t1, q1)
@@ -498,6 +515,25 @@ class IdaIntegrator(Integrator):
         if t_stop < opts.t_end:
             return SegmentEnd(t1, q1, v1, (), "restart")
         return SegmentEnd(t1, q1, v1, (), "end")
+
+    def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
+        """Raise the absolute tolerances of positions and of velocities to the round-off
+        of their largest entry in ``y`` (:data:`ROUNDOFF_ATOL` of it) where the run's
+        atol is below it; True when that raises them by more than :data:`OUTGROWN` (with
+        ``check``: only tell, change nothing). A state that has grown so much since the
+        segment's start (the squeezer's spin-up, 1e-14 to 3e-10) is what IDA failed on;
+        a smaller rise (A02's speeds change by a few times near a singular position)
+        leaves the failure to the singular-position logic."""
+        nz = self.u.nz
+        cur = self.atol[:2 * nz]
+        new = np.maximum(cur, self.opts.atol)
+        for blk in (slice(0, nz), slice(nz, 2 * nz)):
+            floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
+            new[blk] = np.maximum(self.opts.atol, floor)
+        raised = bool(np.any(new > OUTGROWN * cur))
+        if not check:
+            self.atol[:2 * nz] = new
+        return raised
 
     def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
         """A first step (s) whose order-1 local error in the coordinates, h^2 / 2 |z''|
