@@ -223,6 +223,9 @@ def animate(res: Result, path: str | Path, *, fps: int = 20,
     if not (isinstance(fps, int) and fps >= 1):
         raise CmmError(f"fps: expected a whole number >= 1 of frames per second, got {fps!r}")
     path = Path(path)
+    if path.suffix.lower() != ".gif":
+        raise CmmError(f"path {str(path)!r}: the animation is written as a GIF; give a file "
+                       "name ending in .gif")
     images = [Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE, colors=64)
               for f in _frames(res, max_frames, dpi)]
     images[0].save(path, save_all=True, append_images=images[1:], loop=0,

@@ -87,6 +87,17 @@ def _branch(text: str) -> str | tuple[str, int]:
     return joint, signs[sign]
 
 
+def _positive_int(text: str) -> int:
+    """An integer >= 1 (``--workers``)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return n
+
+
 def _run(args: argparse.Namespace) -> int:
     from . import simulate
 
@@ -182,6 +193,9 @@ def _structure(args: argparse.Namespace) -> int:
 def _animate(args: argparse.Namespace) -> int:
     from .animation import animate
 
+    if Path(args.out).suffix.lower() != ".gif":
+        raise CmmError(f"--out {args.out!r}: the animation is written as a GIF; give a "
+                       "file name ending in .gif")
     _refuse_overwrite([args.out], args.force)
     res = _result_of(args.source, args.t_end)
     print(f"wrote {animate(res, args.out, fps=args.fps, max_frames=args.frames)}")
@@ -227,9 +241,14 @@ def _sweep(args: argparse.Namespace) -> int:
     from .sweep import parse_range, sweep
 
     mech = _load(args.model)
-    params = dict(parse_range(p) for p in args.param)
+    pairs = [parse_range(p) for p in args.param]
+    params = dict(pairs)
     if not params:
         raise CmmError("give at least one --param PATH=A:B:N")
+    twice = sorted({k for k, _ in pairs if sum(k == x for x, _ in pairs) > 1})
+    if twice:
+        raise CmmError(f"--param {', '.join(twice)} given more than once; give each "
+                       "parameter one range (a grid takes one --param per parameter)")
     client = None
     if args.scheduler:
         try:
@@ -237,7 +256,12 @@ def _sweep(args: argparse.Namespace) -> int:
         except ImportError:
             raise CmmError("--scheduler needs dask.distributed: pip install "
                            "'cmm_dae[scale]'") from None
-        client = Client(args.scheduler)
+        try:
+            client = Client(args.scheduler, timeout="20s")
+        except (ValueError, OSError, TimeoutError) as e:
+            raise CmmError(f"--scheduler {args.scheduler!r}: no Dask scheduler there "
+                           f"({type(e).__name__}: {e}); expected an address such as "
+                           "tcp://host:8786") from None
     table = sweep(mech, params, t_end=args.t_end, client=client, workers=args.workers,
                   checkpoint=args.out, progress=True, rtol=args.rtol,
                   compiled=args.compiled)
@@ -380,7 +404,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", required=True, help="CSV written as runs finish (and resumed)")
     sw.add_argument("--t-end", type=float, default=10.0, help="end time, s (10)")
     sw.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
-    sw.add_argument("--workers", type=int, default=None, help="local processes (all cores)")
+    sw.add_argument("--workers", type=_positive_int, default=None,
+                    help="local processes (all cores)")
     sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
     sw.add_argument("--compiled", action="store_true",
                     help="run IDA's segments in C (needs a C compiler; built once, cached)")

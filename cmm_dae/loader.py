@@ -11,6 +11,7 @@ import difflib
 import math
 import reprlib
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -186,6 +187,9 @@ def load(path: str | Path) -> Mechanism:
 
 def from_dict(data: dict, *, source: str | None = None) -> Mechanism:
     """Build a mechanism from the parsed TOML structure (see :func:`load`)."""
+    if not isinstance(data, Mapping):
+        raise ModelError(Problem("", "", f"expected a table of tables (a parsed model file), "
+                                 f"got {type(data).__name__}"), source)
     try:
         return _from_dict(data, source)
     except RecursionError:

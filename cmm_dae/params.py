@@ -37,6 +37,11 @@ _FIELDS = {
 }
 
 
+#: Law fields a load's dotted path may set (``loads.NAME.FIELD``), per law kind.
+_LAW_USES = {"constant": ("value",), "harmonic": ("mean", "amplitude", "frequency", "phase"),
+             "motor": ("stall", "no_load_speed"), "polynomial": (), "table": ()}
+_LAW_FIELDS = ("value", "mean", "amplitude", "frequency", "phase", "stall", "no_load_speed")
+
 #: Driver fields each motion law reads.
 _DRIVER_USES = {"constant_speed": ("initial", "speed"), "polynomial": (),
                 "harmonic": ("initial", "amplitude", "frequency", "phase"), "table": ()}
@@ -58,6 +63,13 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
             return f"joint '{name}' has no {fld[7:]} limit"
         if fld.startswith("friction.") and j.friction is None:
             return f"joint '{name}' has no friction"
+    if table == "loads":
+        law = mech.loads[name].law
+        if law.func is not None:
+            return f"load '{name}' is a Python callable: it reads none of its fields"
+        if fld not in _LAW_USES[law.kind]:
+            uses = ", ".join(_LAW_USES[law.kind]) or "only its lists"
+            return f"load '{name}' follows the '{law.kind}' law, which reads {uses}"
     if table == "drivers":
         d = mech.drivers[name]
         if fld not in _DRIVER_USES[d.motion]:
@@ -100,13 +112,52 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
             and ".".join(parts[2:]) in _FIELDS[parts[0]]:
         why = _no_effect(mech, parts)
         return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+    if parts[0] == "loads" and len(parts) == 3 and parts[1] in mech.loads \
+            and parts[2] in _LAW_FIELDS:
+        why = _no_effect(mech, parts)
+        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
     if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
             and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
                                              and parts[1] in ("x", "y")):
         return None
-    return Problem("sweep", path, "not a parameter of the mechanism; e.g. "
-                   "joints.D.spring.stiffness, bodies.slider.mass, joints.E.limits.upper, "
-                   "drivers.A.speed, bodies.crank.points.B.x, ground.points.O.y")
+    return Problem("sweep", path, f"not a parameter of the mechanism{_hint(mech, parts)}; "
+                   f"e.g. {', '.join(examples(mech))}")
+
+
+def examples(mech: Mechanism, n: int = 6) -> list[str]:
+    """A few dotted paths that are parameters of this mechanism (for messages)."""
+    out = [f"bodies.{b}.mass" for b in list(mech.bodies)[:1]]
+    out += [f"joints.{j}.spring.stiffness" for j, x in mech.joints.items() if x.spring][:1]
+    out += [f"joints.{j}.limits.{'upper' if x.limits.upper is not None else 'lower'}"
+            for j, x in mech.joints.items() if x.limits][:1]
+    out += [f"drivers.{d}.{_DRIVER_USES[x.motion][-1]}" for d, x in mech.drivers.items()
+            if _DRIVER_USES[x.motion]][:1]
+    out += [f"loads.{k}.{_LAW_USES[x.law.kind][0]}" for k, x in mech.loads.items()
+            if x.law.func is None and _LAW_USES[x.law.kind]][:1]
+    j = next(iter(mech.joints.values()), None)
+    if j is not None:
+        body, pt = j.second.split(".", 1)
+        out.append(f"bodies.{body}.points.{pt}.x" if body != GROUND
+                   else f"ground.points.{pt}.x")
+    out.append("gravity.y")
+    return out[:n]
+
+
+def _hint(mech: Mechanism, parts: list[str]) -> str:
+    """' (did you mean ...?)' for a misspelt table or name, else ''."""
+    import difflib
+
+    names = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers,
+             "elements": mech.elements, "loads": mech.loads}
+    tables = [*names, "initial", "gravity", GROUND]
+    if parts[0] not in tables:
+        near = difflib.get_close_matches(parts[0], tables, n=1)
+        return f" (no table '{parts[0]}'" + (f": did you mean '{near[0]}'?)" if near else ")")
+    if parts[0] in names and len(parts) > 1 and parts[1] not in names[parts[0]]:
+        near = difflib.get_close_matches(parts[1], list(names[parts[0]]), n=1)
+        return (f" (no {parts[0][:-1] if parts[0] != 'bodies' else 'body'} '{parts[1]}'"
+                + (f": did you mean '{near[0]}'?)" if near else ")"))
+    return ""
 
 
 def param_value(mech: Mechanism, path: str) -> float:
@@ -125,6 +176,8 @@ def param_value(mech: Mechanism, path: str) -> float:
         table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
         return float(table.get(parts[2], math.nan))
     obj = getattr(mech, parts[0])[parts[1]]
+    if parts[0] == "loads":
+        obj = obj.law
     for name in parts[2:]:
         obj = getattr(obj, name) if obj is not None else None
     return float(obj) if obj is not None else (0.0 if parts[-1] in ("stiffness", "damping")
@@ -139,7 +192,9 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     ``joints.NAME.limits.lower|upper``, ``joints.NAME.friction.static|kinetic``,
     ``drivers.JOINT.speed|initial|amplitude|...``,
     ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
-    ``initial.velocities.NAME``, ``gravity.x|y``, point coordinates in their frame
+    ``initial.velocities.NAME``, ``gravity.x|y``, a load's law
+    ``loads.NAME.value|mean|amplitude|frequency|phase|stall|no_load_speed`` (as its law
+    reads them), point coordinates in their frame
     (link lengths, pivot positions) ``bodies.NAME.points.POINT.x|y`` and
     ``ground.points.POINT.x|y``, m.
 
@@ -173,6 +228,7 @@ def symbolic(mech: Mechanism, values: Mapping[str, object]) -> Mechanism:
 
 def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mechanism:
     tables = {k: dict(getattr(mech, k)) for k in _TABLES}
+    loads = dict(mech.loads)
     ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
     gravity = list(mech.gravity)
     ground = dict(mech.ground)
@@ -186,6 +242,9 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
             xy = list(pts[name])
             xy["xy".index(parts[-1])] = value
             pts[name] = tuple(xy)
+        elif parts[0] == "loads":
+            ld = loads[parts[1]]
+            loads[parts[1]] = replace(ld, law=replace(ld.law, **{parts[2]: value}))
         elif parts[0] in tables:
             table = tables[parts[0]]
             obj = table[parts[1]]
@@ -207,7 +266,8 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
         if not check:  # the constructor makes the points floats
             object.__setattr__(b, "points", _frozen(pts))
         tables["bodies"][body] = b
-    out = mech.replace(**tables, initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
+    out = mech.replace(**tables, loads=loads,
+                       initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
                        gravity=tuple(gravity), ground=ground, check=check)
     if not check:  # the constructor makes the gravity and the ground points floats
         object.__setattr__(out, "gravity", tuple(gravity))

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import CmmError
+from .errors import CmmError, ModelError, Problem
 from .result import Result
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -218,6 +218,10 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     if a.meta["joints"] != b.meta["joints"] or a.meta["bodies"] != b.meta["bodies"]:
         raise CmmError("the two results are of different mechanisms")
     t_end = min(a.t[-1], b.t[-1])
+    if dt is not None and not (isinstance(dt, int | float) and not isinstance(dt, bool)
+                               and math.isfinite(dt) and dt > 0):
+        raise ModelError(Problem("compare", "dt", f"expected a positive step in s or None, "
+                                 f"got {dt!r}"))
     if dt is None:
         steps = [np.median(np.diff(np.unique(r.t))) for r in (a, b) if np.unique(r.t).size > 1]
         dt = max(steps) if steps else t_end

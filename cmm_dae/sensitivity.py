@@ -161,6 +161,11 @@ def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
         why = path_problem(mech, x)
         if why is not None:
             bad.append(Problem("sensitivities", x, why.message))
+        elif x.startswith("loads."):
+            bad.append(Problem("sensitivities", x, "a load's law value is a parameter of "
+                               "sweeps, with_params and design studies, but its "
+                               "sensitivities are not computed (the model reads it at run "
+                               "time, outside its differentiated equations)"))
     if bad:
         raise ModelError(bad, mech.source)
     return tuple(params)
@@ -222,6 +227,11 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
 
     wall0 = time.perf_counter()
     require_mechanism(mech, "sensitivities")
+    if "method" in run_options and run_options["method"] != "ida":
+        raise ModelError(Problem("sensitivities", "method", f"sensitivities are computed "
+                                 f"along an IDA run only (method=\"ida\"), got "
+                                 f"{run_options['method']!r}"))
+    run_options.pop("method", None)
     paths = check_params(mech, params)
     if atol is None and isinstance(rtol, float | int):
         atol = 1e-2 * rtol  # as for a run

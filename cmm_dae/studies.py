@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .equations import Model
-from .errors import CmmError, SolverError
+from .errors import CmmError, ModelError, Problem, SolverError
 from .mechanism import Mechanism
 from .result import Result
 from .runner import simulate
@@ -80,6 +80,11 @@ def convergence(mech: Mechanism, dts: list[float], *, t_end: float = 1.0,
     -------
     Convergence
     """
+    if not (isinstance(dts, list | tuple | np.ndarray) and len(dts) > 0 and all(
+            isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+            and 0 < x <= t_end for x in dts)):
+        raise ModelError(Problem("convergence", "dts", f"expected a non-empty list of steps "
+                                 f"in (0, t_end = {t_end!r}] s, got {dts!r}"))
     model = model or Model(mech)
     grid_dt = max(dts)
     ref = simulate(mech, t_end, rtol=ref_rtol, atol=ref_rtol * 1e-2, output_dt=min(dts),

@@ -245,6 +245,10 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
         One row per case, ordered like the input, with ``case``, the parameters, the
         metrics, ``status``, ``message``, ``t_reached`` and ``wall_s``.
     """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise CmmError(f"workers: expected a whole number >= 1 of local processes or None "
+                       f"(all cores), got {workers!r}")
     cases = cases_from(params)
     names = list(dict.fromkeys(k for c in cases for k in c))
     if cases:

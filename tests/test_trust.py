@@ -202,3 +202,52 @@ def test_bounce_sequence_and_its_lock_against_the_closed_form():
         # microseconds, carries the amplified error of all before (measured 8e-9 s, 1.3e-8)
         assert abs(x.t - t_ref) <= (1e-12 if k < 12 else 2e-8)
         assert abs(s.event_times[k, 0] - d_ref) <= (1e-12 if k < 12 else 5e-8) * abs(d_ref)
+
+
+# ------------------------------------------------------------------ raw errors made clear
+@pytest.mark.parametrize("call,key,text", [
+    (lambda m: cd.sensitivities(m, ["joints.O.limits.lower"], 0.1, method="iterative"),
+     "method", "IDA run only"),
+    (lambda m: cd.convergence(m, []), "dts", "non-empty list of steps"),
+    (lambda m: cd.compare(cd.run_dae(m, 0.1), cd.run_iterative(m, 0.1), dt=0),
+     "dt", "positive step"),
+    (lambda m: cd.from_dict(None), "", "expected a table of tables"),
+    (lambda m: cd.with_params(m, {"bodie.rod.mass": 1.0}), "bodie.rod.mass",
+     "no table 'bodie': did you mean 'bodies'?"),
+    (lambda m: cd.with_params(m, {"bodies.rood.mass": 1.0}), "bodies.rood.mass",
+     "no body 'rood'"),
+])
+def test_api_errors_name_the_key(call, key, text):
+    mech = cd.load(cd.example("pendulum_stop"))
+    with pytest.raises(cd.ModelError) as info:
+        call(mech)
+    p = info.value.problems[0]
+    assert p.key == key and text in p.message
+    if "not a parameter" in p.message:  # examples drawn from this mechanism, not another
+        assert "bodies.rod.mass" in p.message and "joints.D" not in p.message
+
+
+def test_load_values_are_parameters():
+    """docs/theory lists load law values as parameters; they were refused."""
+    mech = cd.load(cd.example("motor_crank_stop"))
+    assert cd.with_params(mech, {"loads.motor.stall": 0.5}).loads["motor"].law.stall == 0.5
+    with pytest.raises(cd.ModelError, match="follows the 'motor' law, which reads stall, "
+                       "no_load_speed"):
+        cd.with_params(mech, {"loads.motor.value": 0.5})
+    with pytest.raises(cd.ModelError, match="sensitivities are not computed"):
+        cd.sensitivities(mech, ["loads.motor.stall"], 0.1)
+
+
+@pytest.mark.parametrize("args,text", [
+    (["sweep", "pendulum_stop", "--param", "joints.O.limits.lower=-0.7:-0.5:2", "--out",
+      "s", "--scheduler", "notaurl"], "--scheduler 'notaurl': no Dask scheduler there"),
+    (["sweep", "pendulum_stop", "--param", "joints.O.limits.lower=-0.7:-0.5:2", "--out",
+      "s", "--workers", "-3"], "--workers: expected a whole number >= 1"),
+    (["animate", "pendulum_stop", "--out", "x.mp4"], "ending in .gif"),
+    (["sweep", "pendulum_stop", "--param", "joints.O.limits.lower=-0.7:-0.5:2", "--param",
+      "joints.O.limits.lower=-0.6:-0.5:2", "--out", "s"], "given more than once"),
+])
+def test_cli_refuses_bad_options_with_one_line(tmp_path, args, text):
+    r = _cli(*args, cwd=tmp_path)
+    assert r.returncode == 2 and text in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "s").exists()
