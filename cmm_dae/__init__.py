@@ -9,9 +9,8 @@ Public API::
     res.driver("A").effort, res.joint("B").force, res.events, res.stats, res.status
 """
 
-from .design import Design, DesignError, Target, design
-from .equations import Model
-from .errors import (
+from .core import moved as _moved
+from .core.errors import (
     STATUS_MESSAGES,
     AssemblyError,
     CmmError,
@@ -20,9 +19,9 @@ from .errors import (
     SolverError,
     Status,
 )
-from .library import example, examples
-from .loader import from_dict, load
-from .mechanism import (
+from .description.library import example, examples
+from .description.loader import from_dict, load
+from .description.mechanism import (
     Body,
     Damper,
     Driver,
@@ -37,15 +36,17 @@ from .mechanism import (
     Spring,
     Zone,
 )
-from .params import with_params
-from .report import Comparison, compare
-from .result import Configuration, Event, Result, Stats
-from .runner import METHODS, run_dae, run_iterative, simulate
-from .sensitivity import Sensitivities, sensitivities
-from .storage import load_result
-from .structure import Group, Structure, labeller, structure
-from .studies import Convergence, WorkPrecision, convergence, work_precision
-from .sweep import SweepTable, sweep
+from .description.params import with_params
+from .description.structure import Group, Structure, labeller, structure
+from .equations.model import Model
+from .report.compare import Comparison, compare
+from .results.result import Configuration, Event, Result, Stats
+from .results.storage import load_result
+from .sensitivity.run import Sensitivities, sensitivities
+from .simulation.runner import METHODS, run_dae, run_iterative, simulate
+from .studies.design import Design, DesignError, Target, design
+from .studies.precision import Convergence, WorkPrecision, convergence, work_precision
+from .studies.sweep import SweepTable, sweep
 
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
@@ -60,4 +61,16 @@ __all__ = [
     "structure", "sweep", "Target", "SweepTable", "with_params", "work_precision", "WorkPrecision",
     "Zone",
 ]
-__version__ = "0.2.0"
+__version__ = "0.3.0"
+
+_moved.install()  # the module paths before 0.3 still import, with a DeprecationWarning
+
+
+def __getattr__(name: str):
+    """``cmm_dae.<old module>`` as an attribute (``cmm_dae.params`` before 0.3): the module
+    that holds its code now, with a DeprecationWarning (see :mod:`cmm_dae.core.moved`)."""
+    if name in _moved.MOVED:
+        import importlib
+
+        return importlib.import_module(f"cmm_dae.{name}")
+    raise AttributeError(f"module 'cmm_dae' has no attribute {name!r}")

@@ -13,13 +13,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from .errors import CmmError, SolverError
+from .core.errors import CmmError, SolverError
 
 
 def _load(arg: str):
     """A model given as a file path or as the name of a shipped example."""
     from . import load
-    from .library import model_path
+    from .description.library import model_path
 
     return load(model_path(arg))
 
@@ -119,8 +119,8 @@ def _iterate(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     from . import Model, compare, simulate
-    from .plots import work_precision as wp_plot
-    from .studies import work_precision
+    from .report.plots import work_precision as wp_plot
+    from .studies.precision import work_precision
 
     out = Path(args.out)
     _refuse_overwrite([out / "report.md", out / "report.html"], args.force)
@@ -167,7 +167,7 @@ def _compare(args: argparse.Namespace) -> int:
 def _result_of(source: str, t_end: float):
     """A saved Result (.npz) or a run of a model file (.toml); anything else is refused."""
     from . import load_result, simulate
-    from .library import model_path
+    from .description.library import model_path
 
     path = model_path(source)
     if path.suffix == ".npz":
@@ -184,14 +184,14 @@ def _events(args: argparse.Namespace) -> int:
 
 
 def _structure(args: argparse.Namespace) -> int:
-    from .structure import structure
+    from .description.structure import structure
 
     print(structure(_load(args.model)))
     return 0
 
 
 def _animate(args: argparse.Namespace) -> int:
-    from .animation import animate
+    from .report.animation import animate
 
     if Path(args.out).suffix.lower() != ".gif":
         raise CmmError(f"--out {args.out!r}: the animation is written as a GIF; give a "
@@ -203,7 +203,7 @@ def _animate(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from . import plots
+    from .report import plots
 
     out = Path(args.out)
     _refuse_overwrite(sorted(out.glob("*.png")) if out.is_dir() else [], args.force)
@@ -223,8 +223,8 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from .bench import bench_models, chain_growth, chain_table, table
-    from .library import examples_dir, model_path
+    from .description.library import examples_dir, model_path
+    from .studies.bench import bench_models, chain_growth, chain_table, table
 
     if args.repeat < 1:
         raise CmmError(f"--repeat must be at least 1, not {args.repeat}")
@@ -238,7 +238,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from .sweep import parse_range, sweep
+    from .studies.sweep import parse_range, sweep
 
     mech = _load(args.model)
     pairs = [parse_range(p) for p in args.param]
@@ -271,7 +271,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _examples(args: argparse.Namespace) -> int:
-    from .library import example, examples
+    from .description.library import example, examples
 
     for name in examples():
         print(f"{name:<28} {example(name)}")
@@ -279,7 +279,7 @@ def _examples(args: argparse.Namespace) -> int:
 
 
 def _schema(args: argparse.Namespace) -> int:
-    from . import schema
+    from .description import schema
 
     sys.stdout.write(schema.reference_markdown() if args.markdown else schema.json_text())
     return 0
@@ -305,8 +305,8 @@ def _sensitivities(args: argparse.Namespace) -> int:
 
 
 def _design(args: argparse.Namespace) -> int:
-    from .design import DesignError
-    from .studyfile import design_spec
+    from .studies.design import DesignError
+    from .studies.studyfile import design_spec
 
     spec = design_spec(args.spec)
     out = Path(args.out) if args.out else spec.pop("out")

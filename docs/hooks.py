@@ -1,7 +1,7 @@
 """MkDocs hook: pages generated from the package itself, so the docs cannot drift from it.
 
 * ``<!-- model-file-reference -->`` becomes the model-file reference, written from the same
-  description (``cmm_dae.schema.SPEC``) the loader and the JSON Schema use;
+  description (``cmm_dae.description.schema.SPEC``) the loader and the JSON Schema use;
 * ``<!-- cli-reference -->`` becomes the help of every ``cmm-dae`` command;
 * ``<!-- changelog -->`` becomes CHANGELOG.md.
 """
@@ -25,7 +25,7 @@ def _cli_reference() -> str:
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
     if "<!-- model-file-reference -->" in markdown:
-        from cmm_dae.schema import reference_markdown
+        from cmm_dae.description.schema import reference_markdown
 
         markdown = markdown.replace("<!-- model-file-reference -->", reference_markdown())
     if "<!-- cli-reference -->" in markdown:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cmm_dae.library import four_bar_chain  # noqa: F401 - the tests' chain
+from cmm_dae.description.library import four_bar_chain  # noqa: F401 - the tests' chain
 
 
 class Jet:

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae import csegment
-from cmm_dae.errors import SolverError, Status
+from cmm_dae.core.errors import SolverError, Status
+from cmm_dae.integrators import csegment
 
 pytestmark = pytest.mark.skipif(csegment.c_compiler() is None, reason="needs a C compiler")
 
@@ -134,7 +134,7 @@ def test_cache_and_compiler_settings(monkeypatch, tmp_path):
     """An empty CMM_DAE_CACHE means the default folder, not the working directory."""
     from pathlib import Path
 
-    from cmm_dae import buffers
+    from cmm_dae.equations import codegen as buffers
 
     monkeypatch.setenv("CMM_DAE_CACHE", "")
     assert buffers.cache_dir() == Path.home() / ".cache" / "cmm_dae"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae.assembly import assemble_positions, assemble_velocities, initial_guess
+from cmm_dae.hybrid.start import assemble_positions, assemble_velocities, initial_guess
 
 from refs import short_coupler_four_bar
 

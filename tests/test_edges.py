@@ -65,7 +65,7 @@ def test_absurd_nesting_in_a_file_and_from_python(tmp_path):
 def test_directory_and_huge_file(tmp_path, monkeypatch):
     with pytest.raises(cd.ModelError, match="cannot read the file"):
         cd.load(tmp_path)
-    import cmm_dae.loader as loader
+    import cmm_dae.description.loader as loader
 
     monkeypatch.setattr(loader, "MAX_FILE_BYTES", 100)
     p = tmp_path / "big.toml"
@@ -383,7 +383,7 @@ def test_any_exception_in_a_run_keeps_the_partial_result(monkeypatch, method, ex
 
     failing.armed = False
     monkeypatch.setattr(cd.Model, "kkt_from", failing)
-    import cmm_dae.runner as sim
+    import cmm_dae.simulation.runner as sim
 
     orig_advance = sim.METHODS[method].advance
 
@@ -404,7 +404,7 @@ def test_any_exception_in_a_run_keeps_the_partial_result(monkeypatch, method, ex
 
 
 def test_iterative_ctrl_c_keeps_the_partial_result(monkeypatch):
-    import cmm_dae.iterative as it
+    import cmm_dae.integrators.iterative as it
 
     mech = cd.load(MODELS / "double_folded.toml")
     orig = it._CompiledStep.__call__

@@ -62,8 +62,8 @@ def test_static_analysis_does_not_depend_on_the_named_coordinate():
     file) or by D: the same spring rest, and no acceleration along the free motion."""
     from scipy.linalg import null_space
 
-    from cmm_dae.assembly import start_state
-    from cmm_dae.events import HybridState
+    from cmm_dae.hybrid.policy import HybridState
+    from cmm_dae.hybrid.start import start_state
 
     by_e = cd.load(MODELS / "double_folded_preloaded.toml")
     first = cd.run_dae(by_e, 0.01)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-import cmm_dae.ida as ida_mod
+import cmm_dae.integrators.ida as ida_mod
 
 from refs import short_coupler_four_bar
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae import loader, schema
 from cmm_dae.cli import main
+from cmm_dae.description import loader, schema
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = sorted((ROOT / "models").glob("*.toml")) + sorted((ROOT / "tests/models").glob("*.toml"))
@@ -149,7 +149,7 @@ def test_report_moments_at_round_off_when_no_moment_is_real():
     """IFToMM A02 has no driver: every pin's torque is round-off (about 1e-15 N m against
     forces of 18 N), and the report gave them relative errors of 150 %. Moments are now
     measured against the largest force times the mechanism's size as well."""
-    from cmm_dae import iftomm
+    from cmm_dae.description import iftomm
 
     mech = iftomm.a02_four_bar(1)
     cmp = cd.compare(cd.run_dae(mech, 0.5), cd.run_iterative(mech, 0.5, dt=1e-3))
@@ -173,7 +173,7 @@ def test_report_html_has_an_animation(folded, tmp_path):
 def test_gif_has_the_frames_asked_for(folded, tmp_path):
     from PIL import Image
 
-    from cmm_dae.animation import animate
+    from cmm_dae.report.animation import animate
 
     path = animate(folded, tmp_path / "a.gif", max_frames=15, fps=10)
     im = Image.open(path)

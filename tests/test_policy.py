@@ -1,4 +1,4 @@
-"""The event policy (cmm_dae.events) on its own and through both integrators, against closed
+"""The event policy (cmm_dae.hybrid.policy) on its own and through both integrators, against closed
 forms: the impact map, the Zeno rule, crossing detection and confirmation, a jam release,
 two events at one instant, and the fixed-step algorithm coming to rest like IDA."""
 
@@ -12,8 +12,8 @@ import pytest
 from scipy.optimize import brentq
 
 import cmm_dae as cd
-import cmm_dae.events as ev
-from cmm_dae.assembly import assemble_positions, assemble_velocities, initial_guess
+import cmm_dae.hybrid.policy as ev
+from cmm_dae.hybrid.start import assemble_positions, assemble_velocities, initial_guess
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 

@@ -10,8 +10,8 @@ import pytest
 from test_singular import unequal_parallelogram
 
 import cmm_dae as cd
-from cmm_dae.errors import CmmError, ModelError
-from cmm_dae.params import param_value, with_params
+from cmm_dae.core.errors import CmmError, ModelError
+from cmm_dae.description.params import param_value, with_params
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 TIGHT = {"rtol": 1e-12, "atol": 1e-14}

@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import quad
 
 import cmm_dae as cd
-from cmm_dae import iftomm
+from cmm_dae.description import iftomm
 from cmm_dae.singular import step_over
 
 from refs import short_coupler_four_bar

@@ -21,9 +21,11 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae import csegment, ida, iterative, post, schur
-from cmm_dae.errors import ModelError
-from cmm_dae.library import four_bar_chain
+from cmm_dae.core.errors import ModelError
+from cmm_dae.description.library import four_bar_chain
+from cmm_dae.equations import kkt as schur
+from cmm_dae.integrators import csegment, ida, iterative
+from cmm_dae.results import post
 
 
 def test_lean_lock_force_events_locate_the_same_roots(monkeypatch):
@@ -101,7 +103,7 @@ def test_sparse_kkt_solve_matches_dense_and_the_one_dof_reduction():
     relative (measured 1.4e-15, 4.1e-15), the cranks' angular acceleration equals the
     parallelogram's one-DOF value -c cos(theta) / I to 1e-12 relative, and at the
     singular position itself both say the KKT matrix is singular."""
-    from cmm_dae import iftomm
+    from cmm_dae.description import iftomm
 
     assert not cd.Model(iftomm.a02_four_bar(4)).kkt_sparse
     n, theta = 20, -2.0

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import cmm_dae as cd
-from cmm_dae.structure import configuration_label, labeller
+from cmm_dae.description.structure import configuration_label, labeller
 
 from refs import four_bar_chain
 
@@ -69,7 +69,8 @@ def test_labels_cost_nothing_without_a_geometric_lock(monkeypatch):
     """The labeller runs the structure analysis only for a label that needs it."""
     import sys
 
-    structure_mod = sys.modules["cmm_dae.structure"]  # the package exports a function too
+    # the package exports a function of that name too
+    structure_mod = sys.modules["cmm_dae.description.structure"]
     calls = []
     orig = structure_mod.structure
     monkeypatch.setattr(structure_mod, "structure",

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cmm_dae as cd
-from cmm_dae import iftomm
+from cmm_dae.description import iftomm
 
 
 @pytest.mark.parametrize("path,value,key", [
@@ -65,7 +65,8 @@ def test_a02_steps_in_place_hand_over_to_the_crossing(caplog):
     import io
 
     out = io.StringIO()
-    with caplog.at_level(logging.DEBUG, logger="cmm_dae.ida"), contextlib.redirect_stdout(out):
+    with caplog.at_level(logging.DEBUG, logger="cmm_dae.integrators.ida"), \
+            contextlib.redirect_stdout(out):
         res = cd.run_dae(iftomm.a02_four_bar(1), 1.3, rtol=1e-10, atol=1e-12,
                          output_dt=None)
     assert out.getvalue() == ""

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 import cmm_dae as cd
-from cmm_dae import iftomm
-from cmm_dae.equations import Model
+from cmm_dae.description import iftomm
+from cmm_dae.equations.model import Model
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 G = 9.81
@@ -78,7 +78,7 @@ def test_redundant_set_keeps_the_pins_rows():
     """A02 with a third crank on a parallelogram (redundant): the dropped row is not one of
     a pin's, so every crank is carried by its angle."""
     mech = iftomm.a02_four_bar(2)
-    from cmm_dae.assembly import redundant_base_rows
+    from cmm_dae.hybrid.start import redundant_base_rows
 
     model = Model(mech)
     drop = redundant_base_rows(model)

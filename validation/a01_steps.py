@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import cmm_dae as cd
-from cmm_dae import iftomm
+from cmm_dae.description import iftomm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from iftomm import _ida_on  # noqa: E402  (the validation script beside this one)

@@ -43,7 +43,7 @@ import json, sys, time, gc
 import numpy as np
 import cmm_dae as cd
 if sys.argv[1].startswith("a02:"):  # IFToMM A02 with N loops, from the builder
-    from cmm_dae import iftomm
+    from cmm_dae.description import iftomm
     mech = iftomm.a02_four_bar(int(sys.argv[1][4:]))
 else:
     mech = cd.load(sys.argv[1])
@@ -75,7 +75,7 @@ import json, sys, time
 import numpy as np
 import sksundae as sun
 import cmm_dae as cd
-from cmm_dae import ida
+from cmm_dae.integrators import ida
 mech = cd.load(sys.argv[1])
 t_end, rtol, repeat = float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 counts = {"residual": 0, "jacobian": 0, "events": 0}

@@ -2,7 +2,7 @@
 minimal-coordinate model integrated by DOP853, all measured in one run on this machine.
 
 1. Every shipped model: build time, wall time per simulated second, steps, evaluations,
-   events, peak memory, constraint drift (cmm_dae.bench).
+   events, peak memory, constraint drift (cmm_dae.studies.bench).
 2. Double-folded mechanism, one 10-s cycle: error in the driving torque (max over the
    0.01-s grid, away from the switches) against IDA at rtol 1e-12, for IDA over rtol
    1e-4 .. 1e-10, the iterative algorithm over dt 1e-2 .. 1e-4 and DOP853 over rtol
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import cmm_dae as cd
-from cmm_dae.bench import bench_models, table
+from cmm_dae.studies.bench import bench_models, table
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -139,7 +139,7 @@ def main() -> None:
             lines.append(f"- at DOP853 {r['setting']} accuracy ({r['error']:.2e} N m): IDA "
                          f"{w_ida * 1e3:.1f} ms vs DOP853 {r['wall'] * 1e3:.1f} ms "
                          f"(IDA / DOP853 = {w_ida / r['wall']:.2f})")
-    from cmm_dae.plots import work_precision
+    from cmm_dae.report.plots import work_precision
 
     work_precision(wp, OUT / "work_precision.png",
                    "double-folded mechanism: driving-torque error vs wall time\n"

@@ -1,6 +1,6 @@
 """The double-folded mechanism redesigned: E locks at exactly 2.5 s and releases at exactly
 7.5 s with the smallest peak driving torque, over D's spring stiffness, D's spring rest and
-E's stop position (SLSQP on exact sensitivities, :func:`cmm_dae.design`). Compared with
+E's stop position (SLSQP on exact sensitivities, :func:`cmm_dae.studies.design`). Compared with
 what a brute-force grid over the same bounds finds (the grid point meeting the targets
 best, and the lowest peak torque among the grid points within 20 ms of both).
 

@@ -21,7 +21,7 @@ import numpy as np
 import sksundae as sun
 
 import cmm_dae as cd
-from cmm_dae import iftomm
+from cmm_dae.description import iftomm
 
 OUT = Path(__file__).resolve().parent / "out"
 

@@ -179,7 +179,7 @@ def main() -> None:
 
 
 def _figure(t, series, res, path):
-    from cmm_dae import plots
+    from cmm_dae.report import plots
 
     plt = plots.plt
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)

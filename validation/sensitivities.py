@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import cmm_dae as cd
-from cmm_dae.params import param_value, path_problem, with_params
+from cmm_dae.description.params import param_value, path_problem, with_params
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = Path(__file__).resolve().parent / "out" / "sensitivities"

@@ -38,9 +38,9 @@ import before_after  # noqa: E402
 import memory  # noqa: E402
 
 import cmm_dae as cd  # noqa: E402
-from cmm_dae import iftomm  # noqa: E402
-from cmm_dae.bench import chain_growth, chain_table  # noqa: E402
-from cmm_dae.equations import KKT_SPARSE_FROM  # noqa: E402
+from cmm_dae.description import iftomm  # noqa: E402
+from cmm_dae.equations.model import KKT_SPARSE_FROM  # noqa: E402
+from cmm_dae.studies.bench import chain_growth, chain_table  # noqa: E402
 
 #: profile entries (file fragment, function) -> part
 PARTS = [

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import cmm_dae as cd
-from cmm_dae import plots
+from cmm_dae.report import plots
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = Path(__file__).resolve().parent / "out" / "sweep_double_folded"

@@ -1,0 +1,426 @@
+"""Mechanism description: frozen dataclasses, buildable in Python or loaded from TOML.
+
+SI units throughout: m, kg, s, rad, N, N m. A body's pose is the position and angle
+of its own frame, the frame its ``points`` and ``centroid`` are written in.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import InitVar, dataclass, field
+from types import MappingProxyType
+from typing import Literal
+
+from ..core.errors import ModelError, Problem
+from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
+
+__all__ = [
+    "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Damper", "Driver",
+    "Element", "Friction", "Initial", "Joint", "Law", "Limits", "Load", "Mechanism", "Spring",
+    "Zone", "require_mechanism", "validate",
+]
+
+
+Vec2 = tuple[float, float]
+
+
+def _frozen(d: dict | None) -> MappingProxyType:
+    return MappingProxyType(dict(d or {}))
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body.
+
+    Parameters
+    ----------
+    name : str
+        Body name (unique, not ``"ground"``).
+    mass : float
+        Mass, kg (> 0).
+    inertia : float
+        Moment of inertia about the centroid, kg m^2 (> 0).
+    centroid : (float, float)
+        Centroid in the body frame, m.
+    points : dict[str, (float, float)]
+        Named points in the body frame, m.
+    guess : (float, float, float) or None
+        Pose guess (x m, y m, theta rad) of the body frame for assembly.
+    """
+
+    name: str
+    mass: float
+    inertia: float
+    centroid: Vec2 = (0.0, 0.0)
+    points: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    guess: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", _frozen(
+            {k: (float(v[0]), float(v[1])) for k, v in dict(self.points).items()}))
+        object.__setattr__(self, "centroid", (float(self.centroid[0]), float(self.centroid[1])))
+
+    def __reduce__(self):  # MappingProxyType does not pickle: rebuild from plain dicts
+        return (Body, (self.name, self.mass, self.inertia, self.centroid, dict(self.points),
+                       self.guess))
+
+    @classmethod
+    def with_inertia_about(cls, name: str, mass: float, inertia: float, about: Vec2,
+                           centroid: Vec2, **kw) -> Body:
+        """Build a body whose inertia is given about a point (parallel-axis theorem).
+
+        ``inertia`` is about ``about`` (body frame, m); the stored value is centroidal.
+        """
+        d2 = (about[0] - centroid[0]) ** 2 + (about[1] - centroid[1]) ** 2
+        return cls(name, mass, inertia - mass * d2, centroid, **kw)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Extreme positions of a joint coordinate (rad or m); either side may be None."""
+
+    lower: float | None = None
+    upper: float | None = None
+
+
+@dataclass(frozen=True)
+class Spring:
+    """Linear spring on a joint coordinate: force -stiffness (c - rest).
+
+    stiffness in N m/rad (revolute) or N/m (prismatic); rest in rad or m.
+    """
+
+    stiffness: float
+    rest: float = 0.0
+
+
+@dataclass(frozen=True)
+class Damper:
+    """Linear damper on a joint coordinate rate: N m s/rad or N s/m."""
+
+    damping: float
+
+
+class _TwoPoints:
+    """Bodies of a ``first``/``second`` pair of "body.point" references."""
+
+    first: str
+    second: str
+
+    @property
+    def first_body(self) -> str:
+        return self.first.split(".", 1)[0]
+
+    @property
+    def second_body(self) -> str:
+        return self.second.split(".", 1)[0]
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Dry friction in a joint: it sticks while the force it must carry stays within
+    ``static`` and slides against ``kinetic`` (N for a prismatic joint, N m for a revolute
+    one; static >= kinetic >= 0)."""
+
+    static: float
+    kinetic: float
+
+
+@dataclass(frozen=True)
+class Joint(_TwoPoints):
+    """A lower pair between two bodies (either may be ``ground``).
+
+    Parameters
+    ----------
+    name : str
+        Joint name.
+    type : {"revolute", "prismatic"}
+        Pair type.
+    first, second : str
+        ``"body.point"`` of the first and the second body.
+    axis : (float, float)
+        Prismatic sliding direction in the first body's frame (normalised on use).
+    angle : float
+        Prismatic: the held relative angle ``theta_second - theta_first``, rad.
+    limits : Limits or None
+        Extreme positions of the joint coordinate (geometric constraint).
+    restitution : float
+        Newton coefficient at the limits, 0 (plastic) to 1.
+    spring : Spring or None
+        Spring on the joint coordinate (a rest beyond a limit is a preload: force constraint).
+    damper : Damper or None
+        Damper on the joint coordinate rate.
+    friction : Friction or None
+        Dry friction (stick/slip, event-located; no regularisation).
+    """
+
+    name: str
+    type: Literal["revolute", "prismatic"]
+    first: str
+    second: str
+    axis: Vec2 = (1.0, 0.0)
+    angle: float = 0.0
+    limits: Limits | None = None
+    restitution: float = 0.0
+    spring: Spring | None = None
+    damper: Damper | None = None
+    friction: Friction | None = None
+
+    @property
+    def unit(self) -> str:
+        return "rad" if self.type == "revolute" else "m"
+
+
+@dataclass(frozen=True)
+class Driver:
+    """Prescribed motion of a joint coordinate (one driver per driven joint).
+
+    motion : {"constant_speed", "polynomial", "harmonic", "table"}
+        ``constant_speed``: ``initial + speed t``; ``polynomial``: ``sum c_k t^k``;
+        ``harmonic``: ``initial + amplitude sin(2 pi frequency t + phase)``;
+        ``table``: C2 cubic spline through ``times``/``values`` with zero end slopes,
+        held at the last value after the last time.
+    Units: rad, rad/s, Hz, s (m, m/s for a prismatic joint).
+    """
+
+    joint: str
+    motion: str = "constant_speed"
+    initial: float = 0.0
+    speed: float = 0.0
+    coefficients: tuple[float, ...] = ()
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+
+    def value0(self) -> float:
+        """Coordinate at t = 0."""
+        if self.motion == "constant_speed":
+            return self.initial
+        if self.motion == "polynomial":
+            return self.coefficients[0] if self.coefficients else 0.0
+        if self.motion == "harmonic":
+            return self.initial + self.amplitude * math.sin(self.phase)
+        return self.values[0]
+
+
+@dataclass(frozen=True)
+class Law:
+    """A scalar law of a load: of time, and for ``motor`` of the loaded joint's rate.
+
+    kind : {"constant", "polynomial", "harmonic", "table", "motor"}
+        ``constant``: ``value``; ``polynomial``: ``sum coefficients[k] t^k``;
+        ``harmonic``: ``mean + amplitude sin(2 pi frequency t + phase)``;
+        ``table``: C2 cubic spline through ``times``/``values`` (zero end slopes), held at
+        the last value after the last time; ``motor``: ``stall (1 - rate / no_load_speed)``
+        with the rate of the loaded joint (a motor's torque-speed line).
+    func : callable or None
+        From Python only: ``func(t, coordinate, rate) -> float`` replaces the law (its
+        derivatives are taken by finite differences); never a string.
+    Units: those of the load (N, N m), s, Hz, rad.
+    """
+
+    kind: str = "constant"
+    value: float = 0.0
+    coefficients: tuple[float, ...] = ()
+    mean: float = 0.0
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+    stall: float = 0.0
+    no_load_speed: float = 0.0
+    func: Callable[[float, float, float], float] | None = field(default=None, compare=False)
+
+
+@dataclass(frozen=True)
+class Zone:
+    """Where a load acts: while joint ``joint`` (default: the loaded joint) lies in
+    [``lower``, ``upper``] (rad or m; either may be None, open on that side)."""
+
+    joint: str | None = None
+    lower: float | None = None
+    upper: float | None = None
+
+
+@dataclass(frozen=True)
+class Load:
+    """An applied load: a scalar :class:`Law` times what it acts on.
+
+    On a joint coordinate (``joint``): a torque (revolute, N m) or force (prismatic, N),
+    positive along the coordinate on the second body, negative on the first. At a body
+    point (``body`` and ``point``): a force ``law * direction`` (N; ``direction``
+    normalised, in the ``"global"`` or the ``"body"`` frame). On a body without a point: a
+    pure moment (N m, counter-clockwise positive). ``zone`` limits where it acts.
+    """
+
+    name: str
+    law: Law
+    joint: str | None = None
+    body: str | None = None
+    point: str | None = None
+    direction: Vec2 | None = None
+    frame: str = "global"
+    zone: Zone | None = None
+
+    @property
+    def target(self) -> str:
+        """``"joint"``, ``"point"`` or ``"moment"``."""
+        if self.joint is not None:
+            return "joint"
+        return "point" if self.point is not None else "moment"
+
+
+@dataclass(frozen=True)
+class Element(_TwoPoints):
+    """Spring-damper-actuator between two points of any two bodies (ground included).
+
+    Tension ``preload + stiffness (L - rest) + damping L'`` (N) with L the distance of the
+    points (m); a positive tension pulls the points together. stiffness N/m, rest m,
+    damping N s/m, preload N.
+    """
+
+    name: str
+    first: str
+    second: str
+    stiffness: float = 0.0
+    rest: float = 0.0
+    damping: float = 0.0
+    preload: float = 0.0
+
+
+@dataclass(frozen=True)
+class Initial:
+    """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s).
+
+    ``equilibrium``: dotted model paths (``"joints.D.spring.rest"``) solved so that the
+    coordinates named in ``joints`` start with zero acceleration (as many paths as those
+    coordinates), or ``"position"`` to solve those coordinates themselves; () for none.
+    """
+
+    joints: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    velocities: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    equilibrium: tuple[str, ...] | str = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joints", _frozen(self.joints))
+        object.__setattr__(self, "velocities", _frozen(self.velocities))
+        if not isinstance(self.equilibrium, str):
+            object.__setattr__(self, "equilibrium", tuple(self.equilibrium))
+
+    def __reduce__(self):
+        return (Initial, (dict(self.joints), dict(self.velocities), self.equilibrium))
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A planar mechanism: ground points, bodies, joints, drivers, initial state.
+
+    Built from lists or dicts; validated on construction (every problem at once,
+    one :class:`ModelError`) unless ``check=False``.
+    """
+
+    name: str
+    bodies: MappingProxyType
+    joints: MappingProxyType
+    ground: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    drivers: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    initial: Initial = field(default_factory=Initial)
+    gravity: Vec2 = (0.0, -9.81)
+    source: str | None = None
+    loads: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    elements: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    check: InitVar[bool] = True
+
+    def __post_init__(self, check: bool) -> None:
+        dup: list[Problem] = []
+
+        def as_map(items, key, table):
+            if isinstance(items, dict | MappingProxyType):
+                for k, x in items.items():
+                    if getattr(x, key) != k:
+                        dup.append(Problem(f"{table}.{k}", key, f"the entry is keyed '{k}' "
+                                           f"but its {key} is '{getattr(x, key)}'"))
+                return _frozen(items)
+            out: dict = {}
+            for x in items:
+                k = getattr(x, key)
+                if k in out:
+                    dup.append(Problem(f"{table}.{k}", "", f"two entries named '{k}'"
+                                       + (" (one driver per joint)" if table == "drivers"
+                                          else "")))
+                out[k] = x
+            return _frozen(out)
+
+        object.__setattr__(self, "bodies", as_map(self.bodies, "name", "bodies"))
+        object.__setattr__(self, "joints", as_map(self.joints, "name", "joints"))
+        object.__setattr__(self, "drivers", as_map(self.drivers, "joint", "drivers"))
+        object.__setattr__(self, "loads", as_map(self.loads, "name", "loads"))
+        object.__setattr__(self, "elements", as_map(self.elements, "name", "elements"))
+        object.__setattr__(self, "ground", _frozen(
+            {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
+        object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
+        problems = dup + validate(self) if check else []
+        if problems:
+            raise ModelError(problems, self.source)
+
+    def __reduce__(self):
+        return (_rebuild, (self.name, dict(self.bodies), dict(self.joints), dict(self.ground),
+                           dict(self.drivers), self.initial, self.gravity, self.source,
+                           dict(self.loads), dict(self.elements)))
+
+    def replace(self, **changes) -> Mechanism:
+        """A copy with some fields replaced (``bodies=``, ``loads=``, ...), validated."""
+        kw = dict(name=self.name, bodies=dict(self.bodies), joints=dict(self.joints),
+                  ground=dict(self.ground), drivers=dict(self.drivers), initial=self.initial,
+                  gravity=self.gravity, source=self.source, loads=dict(self.loads),
+                  elements=dict(self.elements))
+        kw.update(changes)
+        return Mechanism(**kw)
+
+    @property
+    def limited_joints(self) -> list[str]:
+        """Names of the joints with limits (the metamorphic joints), in file order."""
+        return [n for n, j in self.joints.items() if j.limits is not None]
+
+    @property
+    def lockable_joints(self) -> list[str]:
+        """Joints that can lock: on a stop (limits) or sticking (friction), in file order."""
+        return [n for n, j in self.joints.items()
+                if j.limits is not None or j.friction is not None]
+
+    @property
+    def frictional_joints(self) -> list[str]:
+        """Joints with dry friction, in file order."""
+        return [n for n, j in self.joints.items() if j.friction is not None]
+
+    def point(self, ref: str) -> Vec2:
+        """Local coordinates (m) of ``"body.point"`` in its body frame."""
+        body, pt = ref.split(".", 1)
+        if body == GROUND:
+            return self.ground[pt]
+        return self.bodies[body].points[pt]
+
+
+def require_mechanism(obj: object, caller: str) -> None:
+    """Raise a plain TypeError when ``obj`` is not a :class:`Mechanism` (a model file's
+    path is the usual slip: it said "'PosixPath' object has no attribute 'bodies'")."""
+    if not isinstance(obj, Mechanism):
+        hint = (" (a model file: cmm_dae.load(path) reads it into one)"
+                if isinstance(obj, str | os.PathLike) else "")
+        raise TypeError(f"{caller} expects a cmm_dae.Mechanism{hint}, got "
+                        f"{type(obj).__name__} {obj!r:.80}")
+
+
+def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source, loads=None,
+             elements=None) -> Mechanism:
+    """Unpickling: the description was validated when it was first built."""
+    return Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
+                     initial=initial, gravity=gravity, source=source, loads=loads or {},
+                     elements=elements or {}, check=False)
+
+

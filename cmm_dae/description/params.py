@@ -1,0 +1,275 @@
+"""Scalar model parameters named by dotted paths (``joints.D.spring.stiffness``): which
+paths exist and have an effect, their values, and a mechanism with some of them changed.
+Sweeps, the equilibrium start and design studies all name parameters this way."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import replace
+
+import numpy as np
+
+from ..core.errors import ModelError, Problem
+from .mechanism import (
+    GROUND,
+    Damper,
+    Initial,
+    Limits,
+    Mechanism,
+    Spring,
+    _frozen,
+    require_mechanism,
+)
+
+_SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
+#: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
+_TABLES = ("bodies", "joints", "drivers", "elements")
+
+
+#: Scalar numeric fields a dotted path may set, per table (sub-tables as "spring.rest").
+_FIELDS = {
+    "bodies": ("mass", "inertia"),
+    "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
+               "limits.lower", "limits.upper", "friction.static", "friction.kinetic"),
+    "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
+    "elements": ("stiffness", "rest", "damping", "preload"),
+}
+
+
+#: Law fields a load's dotted path may set (``loads.NAME.FIELD``), per law kind.
+_LAW_USES = {"constant": ("value",), "harmonic": ("mean", "amplitude", "frequency", "phase"),
+             "motor": ("stall", "no_load_speed"), "polynomial": (), "table": ()}
+_LAW_FIELDS = ("value", "mean", "amplitude", "frequency", "phase", "stall", "no_load_speed")
+
+#: Driver fields each motion law reads.
+_DRIVER_USES = {"constant_speed": ("initial", "speed"), "polynomial": (),
+                "harmonic": ("initial", "amplitude", "frequency", "phase"), "table": ()}
+
+
+def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
+    """Why setting this (existing, numeric) path would change nothing, or None."""
+    table, name, fld = parts[0], parts[1], ".".join(parts[2:])
+    if table == "joints":
+        j = mech.joints[name]
+        if fld == "angle" and j.type != "prismatic":
+            return f"joint '{name}' is revolute: 'angle' is read for prismatic joints only"
+        if fld == "restitution" and j.limits is None:
+            return f"joint '{name}' has no limits for a restitution to act at"
+        if fld == "spring.rest" and j.spring is None:
+            return (f"joint '{name}' has no spring: set joints.{name}.spring.stiffness to "
+                    "give it one")
+        if fld.startswith("limits.") and getattr(j.limits, fld[7:], None) is None:
+            return f"joint '{name}' has no {fld[7:]} limit"
+        if fld.startswith("friction.") and j.friction is None:
+            return f"joint '{name}' has no friction"
+    if table == "loads":
+        law = mech.loads[name].law
+        if law.func is not None:
+            return f"load '{name}' is a Python callable: it reads none of its fields"
+        if fld not in _LAW_USES[law.kind]:
+            uses = ", ".join(_LAW_USES[law.kind]) or "only its lists"
+            return f"load '{name}' follows the '{law.kind}' law, which reads {uses}"
+    if table == "drivers":
+        d = mech.drivers[name]
+        if fld not in _DRIVER_USES[d.motion]:
+            uses = ", ".join(_DRIVER_USES[d.motion]) or "only its lists"
+            return f"driver '{name}' moves by '{d.motion}', which reads {uses}"
+    return None
+
+
+def _point_ref(mech: Mechanism, parts: list[str]) -> str | None:
+    """``"body.point"`` of a point-coordinate path (``bodies.B.points.P.x``,
+    ``ground.points.P.y``) naming an existing point, else None."""
+    if len(parts) == 5 and parts[0] == "bodies" and parts[2] == "points" \
+            and parts[1] in mech.bodies and parts[3] in mech.bodies[parts[1]].points \
+            and parts[4] in ("x", "y"):
+        return f"{parts[1]}.{parts[3]}"
+    if len(parts) == 4 and parts[0] == GROUND and parts[1] == "points" \
+            and parts[2] in mech.ground and parts[3] in ("x", "y"):
+        return f"{GROUND}.{parts[2]}"
+    return None
+
+
+def _point_used(mech: Mechanism, ref: str) -> bool:
+    """Whether a joint, force element or point load is attached at ``ref``."""
+    body, pt = ref.split(".", 1)
+    return any(ref in (j.first, j.second) for j in mech.joints.values()) \
+        or any(ref in (e.first, e.second) for e in mech.elements.values()) \
+        or any(ld.body == body and ld.point == pt for ld in mech.loads.values())
+
+
+def path_problem(mech: Mechanism, path: str) -> Problem | None:
+    """Why a dotted path is not a parameter that can be set (None when it is)."""
+    parts = path.split(".")
+    ref = _point_ref(mech, parts)
+    if ref is not None:
+        return None if _point_used(mech, ref) else Problem(
+            "sweep", path, f"has no effect: no joint, force element or load is attached at "
+            f"point '{ref}'")
+    tables = {k: getattr(mech, k) for k in _TABLES}
+    if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
+            and ".".join(parts[2:]) in _FIELDS[parts[0]]:
+        why = _no_effect(mech, parts)
+        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+    if parts[0] == "loads" and len(parts) == 3 and parts[1] in mech.loads \
+            and parts[2] in _LAW_FIELDS:
+        why = _no_effect(mech, parts)
+        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+    if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
+            and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
+                                             and parts[1] in ("x", "y")):
+        return None
+    return Problem("sweep", path, f"not a parameter of the mechanism{_hint(mech, parts)}; "
+                   f"e.g. {', '.join(examples(mech))}")
+
+
+def examples(mech: Mechanism, n: int = 6) -> list[str]:
+    """A few dotted paths that are parameters of this mechanism (for messages)."""
+    out = [f"bodies.{b}.mass" for b in list(mech.bodies)[:1]]
+    out += [f"joints.{j}.spring.stiffness" for j, x in mech.joints.items() if x.spring][:1]
+    out += [f"joints.{j}.limits.{'upper' if x.limits.upper is not None else 'lower'}"
+            for j, x in mech.joints.items() if x.limits][:1]
+    out += [f"drivers.{d}.{_DRIVER_USES[x.motion][-1]}" for d, x in mech.drivers.items()
+            if _DRIVER_USES[x.motion]][:1]
+    out += [f"loads.{k}.{_LAW_USES[x.law.kind][0]}" for k, x in mech.loads.items()
+            if x.law.func is None and _LAW_USES[x.law.kind]][:1]
+    j = next(iter(mech.joints.values()), None)
+    if j is not None:
+        body, pt = j.second.split(".", 1)
+        out.append(f"bodies.{body}.points.{pt}.x" if body != GROUND
+                   else f"ground.points.{pt}.x")
+    out.append("gravity.y")
+    return out[:n]
+
+
+def _hint(mech: Mechanism, parts: list[str]) -> str:
+    """' (did you mean ...?)' for a misspelt table or name, else ''."""
+    import difflib
+
+    names = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers,
+             "elements": mech.elements, "loads": mech.loads}
+    tables = [*names, "initial", "gravity", GROUND]
+    if parts[0] not in tables:
+        near = difflib.get_close_matches(parts[0], tables, n=1)
+        return f" (no table '{parts[0]}'" + (f": did you mean '{near[0]}'?)" if near else ")")
+    if parts[0] in names and len(parts) > 1 and parts[1] not in names[parts[0]]:
+        near = difflib.get_close_matches(parts[1], list(names[parts[0]]), n=1)
+        return (f" (no {parts[0][:-1] if parts[0] != 'bodies' else 'body'} '{parts[1]}'"
+                + (f": did you mean '{near[0]}'?)" if near else ")"))
+    return ""
+
+
+def param_value(mech: Mechanism, path: str) -> float:
+    """The current value of a dotted model path (see :func:`with_params`); a spring,
+    damper or limit that does not exist reads as 0 (stiffness, damping) or NaN."""
+    parts = path.split(".")
+    bad = path_problem(mech, path)
+    if bad is not None:
+        raise ModelError(bad, mech.source)
+    if parts[0] == "gravity":
+        return mech.gravity["xy".index(parts[1])]
+    ref = _point_ref(mech, parts)
+    if ref is not None:
+        return float(mech.point(ref)["xy".index(parts[-1])])
+    if parts[0] == "initial":
+        table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
+        return float(table.get(parts[2], math.nan))
+    obj = getattr(mech, parts[0])[parts[1]]
+    if parts[0] == "loads":
+        obj = obj.law
+    for name in parts[2:]:
+        obj = getattr(obj, name) if obj is not None else None
+    return float(obj) if obj is not None else (0.0 if parts[-1] in ("stiffness", "damping")
+                                                 else math.nan)
+
+
+def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
+    """A copy of ``mech`` with dotted-path values replaced, validated again.
+
+    Paths: ``bodies.NAME.mass|inertia``, ``joints.NAME.restitution|angle``,
+    ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
+    ``joints.NAME.limits.lower|upper``, ``joints.NAME.friction.static|kinetic``,
+    ``drivers.JOINT.speed|initial|amplitude|...``,
+    ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
+    ``initial.velocities.NAME``, ``gravity.x|y``, a load's law
+    ``loads.NAME.value|mean|amplitude|frequency|phase|stall|no_load_speed`` (as its law
+    reads them), point coordinates in their frame
+    (link lengths, pivot positions) ``bodies.NAME.points.POINT.x|y`` and
+    ``ground.points.POINT.x|y``, m.
+
+    Raises
+    ------
+    ModelError
+        A path that is not a numeric parameter of the mechanism, a value that is not a
+        number, or a path whose value the mechanism never reads (e.g. the amplitude of a
+        constant-speed driver), each named.
+    """
+    require_mechanism(mech, "with_params")
+    problems = []
+    for path, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+            problems.append(Problem("sweep", path, f"expected a number, got {value!r}"))
+            continue
+        bad = path_problem(mech, str(path))
+        if bad is not None:
+            problems.append(bad)
+    if problems:
+        raise ModelError(problems, mech.source)
+    return _replaced(mech, {str(k): float(v) for k, v in values.items()}, check=True)
+
+
+def symbolic(mech: Mechanism, values: Mapping[str, object]) -> Mechanism:
+    """A copy of ``mech`` (not validated) whose fields at the given (checked) dotted
+    paths hold other objects: CasADi symbols, from which the model's equations are built
+    as functions of those parameters (sensitivities)."""
+    return _replaced(mech, values, check=False)
+
+
+def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mechanism:
+    tables = {k: dict(getattr(mech, k)) for k in _TABLES}
+    loads = dict(mech.loads)
+    ini_j, ini_v = dict(mech.initial.joints), dict(mech.initial.velocities)
+    gravity = list(mech.gravity)
+    ground = dict(mech.ground)
+    points: dict[str, dict] = {}  # body -> its points, where some changed
+    for path, value in values.items():
+        parts = path.split(".")
+        if _point_ref(mech, parts) is not None:
+            pts = ground if parts[0] == GROUND else points.setdefault(
+                parts[1], dict(mech.bodies[parts[1]].points))
+            name = parts[-2]
+            xy = list(pts[name])
+            xy["xy".index(parts[-1])] = value
+            pts[name] = tuple(xy)
+        elif parts[0] == "loads":
+            ld = loads[parts[1]]
+            loads[parts[1]] = replace(ld, law=replace(ld.law, **{parts[2]: value}))
+        elif parts[0] in tables:
+            table = tables[parts[0]]
+            obj = table[parts[1]]
+            if len(parts) == 3:
+                table[parts[1]] = replace(obj, **{parts[2]: value})
+            else:
+                sub = getattr(obj, parts[2])
+                if sub is None:
+                    sub = _SUB[parts[2]](**({"stiffness": 0.0} if parts[2] == "spring"
+                                            else {"damping": 0.0}
+                                            if parts[2] == "damper" else {}))
+                table[parts[1]] = replace(obj, **{parts[2]: replace(sub, **{parts[3]: value})})
+        elif parts[0] == "initial":
+            (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
+        else:
+            gravity["xy".index(parts[1])] = value
+    for body, pts in points.items():
+        b = replace(tables["bodies"][body], points=pts)
+        if not check:  # the constructor makes the points floats
+            object.__setattr__(b, "points", _frozen(pts))
+        tables["bodies"][body] = b
+    out = mech.replace(**tables, loads=loads,
+                       initial=Initial(ini_j, ini_v, mech.initial.equilibrium),
+                       gravity=tuple(gravity), ground=ground, check=check)
+    if not check:  # the constructor makes the gravity and the ground points floats
+        object.__setattr__(out, "gravity", tuple(gravity))
+        object.__setattr__(out, "ground", _frozen(ground))
+    return out

@@ -1,0 +1,204 @@
+"""Velocity- and position-level geometry of the constraints in force: projections onto
+them, the impact map, and the rows that become dependent at a dead point or a lock-up."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from .model import Model
+from .unknowns import ground_pins
+
+# ------------------------------------------------------------------- geometry
+#: Rows from which :class:`MinNorm` factors by QR: measured side by side, ``lstsq`` took
+#: 0.64x the time of QR and the triangular solve on 11 x 12 rows (the double-folded
+#: mechanism's size), 1.25x on 30 x 33 and 1.8x on 120 x 123 (random full-rank matrices).
+QR_ROWS = 30
+
+
+class MinNorm:
+    """Minimum-norm solutions of ``J x = r`` for one constraint Jacobian ``J``.
+
+    For :data:`QR_ROWS` rows or more with full row rank, from the QR factors of ``J^T``
+    (``J = R^T Q^T``, so ``x = Q R^-T r``), factored once for several right-hand sides.
+    Below that, where it is (numerically) rank deficient, has more rows than columns (a
+    new lock can make the rows dependent until a jam is resolved) or ``rcond`` asks for a
+    cut-off, numpy's SVD-based ``lstsq``.
+    """
+
+    def __init__(self, J: np.ndarray, rcond: float | None = None):
+        self.J, self.rcond = J, rcond
+        self.qr: tuple[np.ndarray, np.ndarray] | None = None
+        m, n = J.shape
+        if rcond is None and QR_ROWS <= m <= n:
+            Q, R = np.linalg.qr(J.T)
+            d = np.abs(np.diag(R))
+            # lstsq's own cut-off (eps max(m, n) of the largest singular value), with a
+            # margin: |R_ii| bound the singular values only roughly
+            if d.min() > 10.0 * np.finfo(float).eps * n * d.max():
+                self.qr = (Q, R)
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        """The minimum-norm x with ``J x = r`` (least squares where there is none)."""
+        if self.qr is None:
+            return np.linalg.lstsq(self.J, r, rcond=self.rcond)[0]
+        Q, R = self.qr
+        return Q @ solve_triangular(R, r, trans="T")
+
+
+def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarray,
+            rcond: float | None) -> np.ndarray:
+    """Minimum-norm Newton iterations onto the rows ``act``."""
+    # round-off in the constraint values grows with the coordinates' size (7e-15 m on
+    # A02 with 40 loops, whose pivots reach x = 40 m): a fixed 1e-15 was never met there
+    # and every projection ran all its iterations
+    tol = 1e-15 * max(1.0, float(np.max(np.abs(q), initial=0.0)))
+    r_prev = np.inf
+    solver: MinNorm | None = None
+    for _ in range(10):
+        con = model.constraints(q, t, p)
+        r = con.phi[act]
+        r_max = float(np.max(np.abs(r), initial=0.0))
+        if r_max < tol or (r_max < 10 * tol and not r_max < r_prev):
+            break  # met, or no longer falling at round-off level
+        # the last factorization while it still converges fast (a simplified Newton
+        # step); a new one where it did not shrink the residual tenfold
+        if solver is None or not r_max < 0.1 * r_prev:
+            solver = MinNorm(con.Phi_q[act], rcond)
+        r_prev = r_max
+        q = q - solver.solve(r)
+    return q
+
+
+def project_state(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+                  rcond: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Minimal-norm projection of (q, v) onto the active position and velocity
+    constraints: Newton on the positions, then the velocities' linear correction with the
+    Jacobian at the projected positions (``rcond``: singular values below it relative to
+    the largest count as zero, for a projection at a singular position)."""
+    q = project_positions(model, q, t, p, rcond)
+    # a fresh factorization, not the Newton iteration's last one: next to a singular
+    # position the Jacobian's pseudo-inverse is large and the last correction moves it
+    # (reusing it left A02 N = 1 over 20 s at rtol 1e-10 8.1e-6 -> 1.9e-5 m off)
+    return q, project_velocities(model, q, v, t, p, rcond)
+
+
+def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                      rcond: float | None = None) -> np.ndarray:
+    """Minimal-norm Newton projection of q onto the active position constraints
+    (``rcond`` as in :func:`project_state`)."""
+    return _newton(model, q, t, p, model.active_rows(p), rcond)
+
+
+def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+                       rcond: float | None = None) -> np.ndarray:
+    """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows; ``rcond``
+    as in :func:`project_state`)."""
+    act = model.active_rows(p)
+    con = model.constraints(q, t, p)
+    J = con.Phi_q[act]
+    return v - MinNorm(J, rcond).solve(J @ v + con.Phi_t[act])
+
+
+def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+               lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
+    """Post-impact velocities and impulses.
+
+    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
+    prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
+    Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
+    """
+    con = model.constraints(q, t, p)
+    b = -con.Phi_t  # drivers keep their velocity, locks keep 0
+    b[model.free_rows(p) != 0.0] = 0.0
+    if lock_row is not None:
+        b[lock_row] = target
+    A = model.kkt_matrix(con.Phi_q, p)
+    sol = np.linalg.solve(A, np.concatenate([model.mass * v, b]))
+    return sol[:model.nq], sol[model.nq:]
+
+
+def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
+    """Smallest over largest singular value of the active constraint rows at q (0 when
+    they are dependent): :func:`dependent_rows`' measure alone, without the singular
+    vectors (several times cheaper on large constraint sets)."""
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
+    if J.size == 0:
+        return 0.0
+    s = np.linalg.svd(J, compute_uv=False)
+    if J.shape[0] > J.shape[1]:
+        return 0.0
+    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
+
+
+def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -> int:
+    """How many singular values of the active rows' Jacobian have collapsed at q, the
+    singular instant, against ``r0``, the ratio where the approach to it was seen: those
+    below a tenth of ``r0`` times the largest (at least 1)."""
+    J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
+    s = np.linalg.svd(J, compute_uv=False)
+    return max(int(np.sum(s < 0.1 * r0 * s[0])), 1) if s.size else 1
+
+
+def row_names(labels: list[str], limit: int = 12) -> str:
+    """The constraint rows' labels for a message: all of them up to ``limit``, else the
+    first ones and how many more (A02 with 40 loops has 102 at its singular positions)."""
+    if len(labels) <= limit:
+        return ", ".join(labels)
+    return f"{', '.join(labels[:limit - 2])} and {len(labels) - limit + 2} more"
+
+
+def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                   tol: float = 1e-6) -> tuple[list[str], float]:
+    """Constraint rows that (nearly) depend on each other at q: the joints, drivers and
+    locks of a dead point or a lock-up. Returns (labels, smallest/largest singular value);
+    no labels when the rows are independent."""
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
+    U, s, _ = np.linalg.svd(J)
+    if J.shape[0] > J.shape[1]:
+        s = np.concatenate([s, np.zeros(J.shape[0] - J.shape[1])])
+    ratio = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
+    if ratio > tol:
+        return [], ratio
+    w = np.abs(U[:, -1])
+    labels = []
+    for i in np.flatnonzero(w > 0.05 * w.max()):
+        r = model.rows[act[i]]
+        lab = f"{r.kind} {r.name}" if r.kind != "joint" else f"joint {r.name}"
+        if lab not in labels:
+            labels.append(lab)
+    return labels, ratio
+
+
+
+def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
+                   ) -> tuple[int, ...]:
+    """Joint and driver rows that depend on the others at q (a redundant constraint set:
+    a parallelogram with a third crank, say): indices into ``model.all_rows``, found by a
+    QR factorisation with column pivoting of the rows' Jacobian (transposed).
+
+    The rows of the joints that pin bodies to the ground are kept (they are independent
+    of each other: one joint per body): IDA integrates those bodies by their angle, which
+    needs both rows of the pin. The dependent rows are then picked among the others,
+    projected on what the pins leave free; their number is the whole set's rank deficit."""
+    from scipy.linalg import qr
+
+    A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
+    if A.shape[0] == 0:
+        return ()
+    _, R, piv = qr(A.T, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > tol * d[0])) if d.size and d[0] > 0 else 0
+    pins = set(ground_pins(model.mech).values())
+    keep = [i for i, r in enumerate(model.all_rows[:model.n_base])
+            if r.kind == "joint" and r.name in pins]
+    if rank == A.shape[0] or not keep or rank < len(keep):
+        return tuple(sorted(int(i) for i in piv[rank:]))
+    kept = set(keep)
+    rest = np.array([i for i in range(A.shape[0]) if i not in kept], dtype=int)
+    Qk, _ = np.linalg.qr(A[keep].T)  # an orthonormal basis of the pins' rows
+    B = A[rest] - (A[rest] @ Qk) @ Qk.T
+    _, _, piv_r = qr(B.T, mode="economic", pivoting=True)
+    return tuple(sorted(int(i) for i in rest[piv_r[rank - len(keep):]]))

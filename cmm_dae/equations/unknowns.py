@@ -1,0 +1,190 @@
+"""IDA's unknowns: the centroid coordinates, with a body pinned to the ground by its angle.
+
+The model's equations are written in every body's centroid coordinates (x, y, theta): a
+constant diagonal mass matrix, and one formulation for sensitivities, post-processing,
+crossings and the fixed-step algorithm. IDA integrates a smaller set. A body joined to
+the ground by a revolute joint has one coordinate of its own, its angle: its centroid is
+``x_c = G - R(theta) (l - c)`` (G the ground point, l the joint's point in the body
+frame, c the centroid there), the joint's two rows hold identically and leave the DAE,
+and so do its reaction unknowns. The rest stays as it was. With z IDA's coordinates
+(``q = Q(z)``, ``v = T(z) w``, ``T = dQ/dz``) the stabilised index-2 residual is
+
+    z' - w + G^T mu = 0
+    T^T (M (T w' + (dT/dz w) w) - Q_f) + G^T lambda = 0
+    phi_r(Q(z), t) + free mu = 0
+    G w + d phi_r / dt + free lambda = 0,       G = d phi_r(Q(z), t) / dz
+
+over the remaining rows ``phi_r`` (T^T Phi_q^T of an eliminated row is zero, so its reaction
+drops out). The equations are the same; only the coordinates IDA's error test and Newton
+iteration see change. Why: on a pendulum the centroid's coordinates made IDA take four times
+the steps the angle alone needs (a reference point at the pivot, with linear constraints,
+took 0.9x; see ``validation/a01_steps.py``). Everything IDA returns is mapped back to
+centroid coordinates at once, so nothing downstream sees the difference; the reactions of
+the eliminated joints come, like all reactions, from the KKT solve of post-processing.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..description.mechanism import GROUND, Mechanism
+
+
+def ground_pins(mech: Mechanism) -> dict[str, str]:
+    """The bodies a revolute joint without a driver pins to the ground: {body: joint}, the
+    first such joint of each body (model order). A driven pin is left out: its angle is
+    prescribed, so carrying its body by it gains nothing, and the double-folded cycle's
+    driven crank by its angle took 9% more steps at rtol 1e-8 and stalled (1e-6 s steps)
+    at 1e-12."""
+    pins: dict[str, str] = {}
+    for name, j in mech.joints.items():
+        if j.type != "revolute" or (j.first_body == GROUND) == (j.second_body == GROUND) \
+                or name in mech.drivers:
+            continue
+        body = j.second_body if j.first_body == GROUND else j.first_body
+        pins.setdefault(body, name)
+    return pins
+
+
+class Unknowns:
+    """IDA's unknowns ``y = [z, w, lambda_r, mu_r]`` and its residual for a model.
+
+    Attributes
+    ----------
+    pinned : dict[str, str]
+        Bodies integrated by their angle alone, and the ground joint that pins each.
+    sel : ndarray of int
+        Indices into q of IDA's coordinates z (``z = q[sel]``, ``w = v[sel]``).
+    nz : int
+        Number of IDA's coordinates.
+    rows : ndarray of int
+        The model's constraint rows that stay in the DAE (indices into ``model.rows``).
+    m : int
+        Number of them.
+    N : int
+        IDA's number of unknowns, ``2 nz + 2 m``.
+    """
+
+    def __init__(self, model: Any, pinned: dict[str, str], q, v, t, p, phi, Qf, free,
+                 Mdiag):
+        # model: the :class:`~cmm_dae.equations.model.Model` being built (not imported here:
+        # this module sits below it)
+        self.model = model
+        self.pinned = dict(pinned)
+        nq = model.nq
+        if not pinned:  # the model's own residual: nothing to map
+            self.sel = np.arange(nq)
+            self.rows = np.arange(model.m)
+            self.nz, self.m, self.N = nq, model.m, model.N
+            self.res_fn, self.jac_fn = model.res_fn, model.jac_fn
+            self.jac_sparse_fn, self.jac_pattern = model.jac_sparse_fn, model.jac_pattern
+            self.res_sx = model.res_sx
+            self._full = None
+            return
+        mech = model.mech
+        joints = set(pinned.values())
+        self.rows = np.array([k for k, r in enumerate(model.rows)
+                              if not (r.kind == "joint" and r.name in joints)], dtype=int)
+        sel = []
+        for i, b in enumerate(model.body_names):
+            sel += [3 * i + 2] if b in pinned else [3 * i, 3 * i + 1, 3 * i + 2]
+        self.sel = np.array(sel, dtype=int)
+        self.nz = nz = len(sel)
+        self.m = m = len(self.rows)
+        self.N = N = 2 * nz + 2 * m
+        z = ca.SX.sym("z", nz)
+        w = ca.SX.sym("w", nz)
+        parts, k = [], 0
+        for b in model.body_names:
+            if b in pinned:
+                j = mech.joints[pinned[b]]
+                ground, own = (j.first, j.second) if j.first_body == GROUND \
+                    else (j.second, j.first)
+                G = ca.DM(mech.point(ground))
+                lx, ly = mech.point(own)
+                cx, cy = mech.bodies[b].centroid
+                th = z[k]
+                c, s = ca.cos(th), ca.sin(th)
+                d = ca.vertcat(c * (lx - cx) - s * (ly - cy), s * (lx - cx) + c * (ly - cy))
+                parts += [G - d, th]
+                k += 1
+            else:
+                parts.append(z[k:k + 3])
+                k += 3
+        qz = ca.vertcat(*parts)
+        T = ca.jacobian(qz, z)
+        vz = T @ w
+        fn = ca.Function("centroid_parts", [q, v, t, p], [phi, Qf, free])
+        phi_f, Q_f, free_f = fn(qz, vz, t, p)
+        idx = self.rows.tolist()
+        phi_r = phi_f[idx] if m else ca.SX(0, 1)
+        free_r = free_f[idx] if m else ca.SX(0, 1)
+        Gz = ca.jacobian(phi_r, z)
+        h_r = Gz @ w + ca.jacobian(phi_r, t)
+        lam = ca.SX.sym("lam", m)
+        mu = ca.SX.sym("mu", m)
+        y = ca.vertcat(z, w, lam, mu)
+        yp = ca.SX.sym("yp", N)
+        zp, wp = yp[:nz], yp[nz:2 * nz]
+        acc = T @ wp + ca.jacobian(vz, z) @ w
+        F = ca.vertcat(zp - w + Gz.T @ mu, T.T @ (Mdiag * acc - Q_f) + Gz.T @ lam,
+                       phi_r + free_r * mu, h_r + free_r * lam)
+        cj = ca.SX.sym("cj")
+        J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
+        self.res_fn = self.res_sx = ca.Function("ida_res", [t, y, yp, p], [F])
+        # transposed, as the model's: CasADi writes column-major, scikit-sundae row-major
+        self.jac_fn = ca.Function("ida_resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
+        self.jac_sparse_fn = ca.Function("ida_resjac_sp", [t, y, yp, cj, p], [J])
+        self.jac_pattern = J.sparsity()
+        yz = ca.SX.sym("yz", 2 * nz)
+        self._full = ca.Function("centroids", [yz], [ca.densify(ca.vertcat(
+            ca.substitute(qz, z, yz[:nz]),
+            ca.substitute(vz, ca.vertcat(z, w), yz)))])
+        self._maps: dict[int, ca.Function] = {}
+        # every model row's multiplier from IDA's: a constant selection matrix (zero rows
+        # for the eliminated joints), built once for every symbolic() call
+        self._select = ca.DM(model.m, m)
+        for k, i in enumerate(self.rows.tolist()):
+            self._select[i, k] = 1.0
+
+    @property
+    def reduced(self) -> bool:
+        """Whether any body is integrated by its angle alone."""
+        return bool(self.pinned)
+
+    def start(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """IDA's (y, y') from a consistent state: centroid coordinates, rates and
+        accelerations and the multipliers of every model row (mu = 0)."""
+        s, r = self.sel, self.rows
+        y = np.concatenate([q[s], v[s], lam[r], np.zeros(self.m)])
+        yp = np.concatenate([v[s], a[s], np.zeros(2 * self.m)])
+        return y, yp
+
+    def centroids(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Centroid coordinates and rates (n, nq) of IDA's states Y (n, >= 2 nz)."""
+        nz, nq = self.nz, self.model.nq
+        if self._full is None:
+            return Y[:, :nq].copy(), Y[:, nq:2 * nq].copy()
+        n = Y.shape[0]
+        if n == 0:
+            return np.zeros((0, nq)), np.zeros((0, nq))
+        fn = self._maps.get(n)
+        if fn is None:
+            fn = self._maps[n] = self._full.map(n) if n > 1 else self._full
+        out = np.asarray(fn(np.ascontiguousarray(Y[:, :2 * nz].T))).reshape(2 * nq, n).T
+        return out[:, :nq].copy(), out[:, nq:].copy()
+
+    def symbolic(self, y) -> tuple:
+        """Centroid coordinates, rates and every model row's multiplier (zero for an
+        eliminated row) as expressions of IDA's y (CasADi SX or MX)."""
+        nz, m = self.nz, self.m
+        if self._full is None:
+            nq = self.model.nq
+            return y[:nq], y[nq:2 * nq], y[2 * nq:2 * nq + m]
+        qv = self._full(y[:2 * nz])
+        nq = self.model.nq
+        lam = ca.mtimes(self._select, y[2 * nz:2 * nz + m])
+        return qv[:nq], qv[nq:], lam

@@ -1,0 +1,244 @@
+"""The state of a hybrid run: which joints are locked (and how), which loads act in their
+zones, which joints slip; the registry of configurations met; the records the event policy
+passes around (:class:`Trigger`, :class:`Transition`, :class:`Policy`).
+
+Lock sets are values: a trial set is an argument of the function that asks, never an edit
+of the shared state undone afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..core.errors import SolverError, Status
+from ..core.records import Configuration, Event
+from ..equations.model import Model
+
+#: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
+#: also the shortest time between a "stay locked" decision and a release of the same joint.
+ZENO_DT = 1e-9
+
+
+Locked = Mapping[str, str]
+
+
+class LockUpError(SolverError):
+    """A new lock leaves the drivers no freedom: the mechanism locks up."""
+
+    def __init__(self, message: str):
+        super().__init__(message, status=Status.LOCK_UP)
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """What an integrator detected: ``kind`` ``"gap"`` (an unlocked joint reached its
+    ``side`` limit) or ``"push"`` (the stop of a locked joint would have to pull)."""
+
+    joint: str
+    side: str
+    kind: str
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Options of the event policy.
+
+    v_lock : float
+        A rebound slower than this (rad/s or m/s) locks the joint.
+    resolution : float
+        Shortest time between two events the integrator resolves, s: :data:`ZENO_DT` for
+        IDA, the step for the fixed-step algorithm. Bounces that accumulate (Zeno) come to
+        rest when they reach it (see :func:`zeno`).
+    gap : (float, float)
+        Smallest gap to a stop at L the integrator resolves is ``gap[0] |L| + gap[1]``, m
+        or rad (IDA: its tolerances on positions): a rebound whose flight would
+        rise less off the stop locks.
+    """
+
+    v_lock: float = 1e-6
+    resolution: float = ZENO_DT
+    #: Smallest gap the integrator tells from its own error, (relative to the stop's
+    #: position, absolute m or rad): a rebound that would rise less off its stop locks.
+    gap: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One event and the state (positions m/rad, velocities) right after it."""
+
+    event: Event
+    q: np.ndarray
+    v: np.ndarray
+
+
+@dataclass
+class SegmentTrace:
+    """What a run did in one configuration segment, for a second pass over the same
+    sequence (the sensitivities): the state handed to the integrator at ``t0``, the
+    configuration (``p``, and the policy's state ``locked``, ``zones``, ``slip``,
+    ``stick_at``), the samples it recorded (indices ``n0`` to ``n1``), how it ended and,
+    per trigger handled there, the transitions it caused."""
+
+    t0: float
+    q: np.ndarray
+    v: np.ndarray
+    p: np.ndarray
+    locked: dict[str, str]
+    zones: frozenset[str]
+    slip: dict[str, int]
+    stick_at: dict[str, float]
+    n0: int
+    n1: int = 0
+    t1: float = math.nan
+    reason: str = ""
+    #: per trigger: the trigger, its transitions, the parameter vector after each
+    groups: list[tuple[Trigger, list[Transition], list[np.ndarray]]] = field(
+        default_factory=list)
+    #: the singular-position crossing that followed the segment (a
+    #: :class:`~cmm_dae.singular.Crossing`), if it ended at one
+    crossing: Any = None
+    #: whether that crossing logged a "singular" event (not when it only took an earlier
+    #: crossing further out)
+    crossing_logged: bool = False
+    #: whether IDA ran the segment with the multipliers out of its error test
+    relaxed: bool = False
+    #: the factor on the multipliers' absolute tolerances (the run's force scale)
+    lambda_scale: float = 1.0
+    #: the singular positions IDA integrated through inside the segment, logged as
+    #: events: (instant in s, index of the first sample after it)
+    passages: list[tuple[float, int]] = field(default_factory=list)
+
+
+def _key(locked: Locked) -> tuple:
+    return tuple(sorted(locked.items()))
+
+
+@dataclass
+class HybridState:
+    """The locked joints now, the registry of configurations met so far and the memory the
+    policy needs across events (last bounce of each joint, "stayed locked" decisions)."""
+
+    model: Model
+    labeller: Callable[[dict[str, str]], tuple[str, int]] | None = None
+    locked: dict[str, str] = field(default_factory=dict)
+    zones: frozenset[str] = frozenset()  # zoned loads acting now
+    slip: dict[str, int] = field(default_factory=dict)  # slipping joint -> direction
+    stick_at: dict[str, float] = field(default_factory=dict)  # stuck joint -> coordinate
+    force_held: dict[str, str] = field(default_factory=dict)  # preloaded joint -> side
+    configurations: list[Configuration] = field(default_factory=list)
+    params: list[np.ndarray] = field(default_factory=list)
+    bounces: dict[str, list[float]] = field(default_factory=dict)  # joint -> bounce times
+    stayed: dict[str, float] = field(default_factory=dict)
+    _index: dict[tuple, int] = field(default_factory=dict)
+    _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
+
+    def limit_value(self, joint: str, side: str) -> float:
+        if side == "stick":
+            return self.stick_at[joint]
+        lim = self.model.mech.joints[joint].limits
+        return lim.lower if side == "lower" else lim.upper
+
+    def _mode(self, locked: Locked, zones, slip) -> tuple:
+        zones = self.zones if zones is None else zones
+        slip = self.slip if slip is None else slip
+        return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
+                tuple(sorted(zones)), tuple(sorted(slip.items())))
+
+    def mode(self) -> tuple:
+        """The configuration in force as a hashable key: locked joints with their sides and
+        lock values, acting zoned loads, slip directions (what the event functions and a
+        configuration's equations depend on)."""
+        return self._mode(self.locked, None, None)
+
+    def params_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                  slip: Mapping[str, int] | None = None) -> np.ndarray:
+        """Parameter vector of any lock set (cached; a trial set is not registered), with
+        the zoned loads ``zones`` acting and the joints ``slip`` slipping (default: as
+        now)."""
+        key = self._mode(locked, zones, slip)
+        p = self._trial.get(key)
+        if p is None:
+            p = self._trial[key] = self.model.params(
+                {j: val for j, _, val in key[0]}, key[1], dict(key[2]))
+        return p
+
+    def index_of(self, locked: Locked, zones: frozenset[str] | None = None,
+                 slip: Mapping[str, int] | None = None) -> int:
+        """Index of the configuration (registered, labelled, on first use)."""
+        key = self._mode(locked, zones, slip)
+        if key not in self._index:
+            lk = {j: s for j, s, _ in key[0]}
+            label, dof = self.labeller(lk) if self.labeller else ("", 0)
+            self._index[key] = len(self.configurations)
+            self.configurations.append(Configuration(
+                tuple(lk), tuple(lk.values()), dof, label, key[1], key[2]))
+            self.params.append(self.params_of(lk, key[1], dict(key[2])))
+        return self._index[key]
+
+    def current(self) -> int:
+        """Index of the configuration in force."""
+        return self.index_of(self.locked)
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.params_of(self.locked)
+
+    def push(self, lam: np.ndarray, joint: str, locked: Locked | None = None) -> float:
+        """Force/torque with which the stop of a locked joint pushes it (>= 0 while held).
+
+        The lock row is ``c - L``; the generalized force on the second body along the joint
+        is ``-lambda``, which the lower stop must give positive and the upper stop negative.
+        """
+        side = (self.locked if locked is None else locked)[joint]
+        k = self.model.n_fixed + self.model.locks.index(joint)
+        return lam[k] if side == "upper" else -lam[k]  # "stick": the lock's force along +c
+
+    def static(self, joint: str) -> float:
+        """Static friction limit of a joint (0 without friction), N or N m."""
+        f = self.model.mech.joints[joint].friction
+        return f.static if f is not None else 0.0
+
+    def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                   locked: Locked | None = None) -> float:
+        """:meth:`push` from a KKT solve at (q, v, t) in configuration ``locked``."""
+        locked = self.locked if locked is None else locked
+        _, lam, _ = self.model.kkt(q, v, t, self.params_of(locked))
+        return self.push(lam, joint, locked)
+
+
+# ------------------------------------------------------------------- queries
+def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -> bool:
+    """True when the active constraint rows of lock set ``locked`` are dependent at q."""
+    p = hs.params_of(locked)
+    J = hs.model.constraints(q, t, p).Phi_q[hs.model.active_rows(p)]
+    s = np.linalg.svd(J, compute_uv=False)
+    rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
+    return rank < J.shape[0]
+
+
+def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+                       locked: Locked) -> tuple[float, float]:
+    """Acceleration of a joint coordinate from a KKT solve in configuration ``locked``,
+    and the largest body acceleration (its scale)."""
+    model = hs.model
+    a, _, _ = model.kkt(q, v, t, hs.params_of(locked))
+    return float(model.joint_accelerations(q, v, a, t)[model.jidx[joint]]), \
+        float(np.max(np.abs(a), initial=0.0))
+
+
+# ------------------------------------------------------------------- decisions
+
+
+def joint_rate(model: Model, q: np.ndarray, v: np.ndarray, joint: str) -> float:
+    return float(model.joint_rates(q, v)[1][model.jidx[joint]])
+
+
+def impulses(model: Model, imp: np.ndarray) -> dict[str, float]:
+    """The nonzero impulse of each constraint row, by row label (N s or N m s)."""
+    return {f"{r.kind} {r.name}": float(x) for r, x in zip(model.rows, imp, strict=True)
+            if x != 0.0}

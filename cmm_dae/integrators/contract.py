@@ -1,0 +1,195 @@
+"""The contract between the run driver (:mod:`cmm_dae.simulation.runner`) and an integrator.
+
+An integrator only advances the state within the configuration in force, from a time to
+the end of the run or to the next trigger, recording output samples on the way, and says
+why it stopped in a :class:`SegmentEnd`. Everything else — options, model, initial state,
+the event policy, failure wrapping, the Result — is the driver's, once for all methods
+(as scipy's ``OdeSolver`` subclasses implement one step and ``solve_ivp`` the rest).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..core.progress import Bar
+from ..core.records import Stats
+from ..equations.model import Model
+from ..hybrid.state import ZENO_DT, HybridState, Policy, Transition, Trigger
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Checked run options (see :func:`cmm_dae.simulate` for their meaning and units)."""
+
+    t_end: float
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    output_dt: float | None = 0.01
+    dt: float = 0.01
+    output_every: int = 1
+    max_events: int = 1000
+    v_lock: float = 1e-6
+    max_steps: int = 500_000
+    #: a progress bar moved to the time reached (None: none)
+    progress: Bar | None = None
+    #: branch at a singular position: None (the branch of the motion) or (joint, +1 / -1)
+    branch: tuple[str, int] | None = None
+    #: IDA: run each segment in C (:mod:`cmm_dae.integrators.csegment`) where a compiler is present
+    compiled: bool = False
+    #: IDA's linear solver: "dense", "sparse" (SuperLU_MT on CasADi's pattern) or "auto"
+    linsolver: str = "auto"
+
+
+@dataclass(frozen=True)
+class SegmentEnd:
+    """Where and why an integrator stopped.
+
+    t : float
+        Time reached, s.
+    q, v : ndarray (nq,)
+        State there (positions m/rad, velocities m/s, rad/s).
+    triggers : tuple of Trigger
+        What was detected at t (several at one instant are all listed), empty otherwise.
+    reason : {"end", "event", "restart", "singular"}
+        Reached ``t_end``; stopped at triggers; or stopped for a restart with nothing to
+        switch (a driver breakpoint, or a state to re-initialise from); or stopped at the
+        last good state before a singular position (the constraints collapse ahead).
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    triggers: tuple[Trigger, ...] = ()
+    reason: Literal["end", "event", "restart", "singular"] = "end"
+
+
+class Recorder:
+    """Output samples (t, q, v, configuration index), appended in time order.
+
+    Kept as blocks of copies: a segment's rows are never views into the integrator's own
+    output (which holds the multipliers too and would stay alive with them)."""
+
+    def __init__(self) -> None:
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._single: list[tuple[float, np.ndarray, np.ndarray, int]] = []
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def last_t(self) -> float:
+        """Time of the last sample, s."""
+        if self._single:
+            return self._single[-1][0]
+        return float(self._blocks[-1][0][-1])
+
+    def add(self, t: float, q: np.ndarray, v: np.ndarray, c: int) -> None:
+        self._single.append((t, np.array(q, dtype=float), np.array(v, dtype=float), c))
+        self._n += 1
+
+    def _flush(self) -> None:
+        if self._single:
+            t, q, v, c = zip(*self._single, strict=True)
+            self._blocks.append((np.array(t, dtype=float), np.array(q), np.array(v),
+                                 np.array(c, dtype=int)))
+            self._single = []
+
+    def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int) -> None:
+        if t.size == 0:
+            return
+        self._flush()
+        self._blocks.append((np.array(t, dtype=float), np.array(q, dtype=float),
+                             np.array(v, dtype=float), np.full(t.size, c, dtype=int)))
+        self._n += t.size
+
+    def since(self, n0: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times, positions and velocities of the samples from index ``n0`` on."""
+        self._flush()
+        rows: list[tuple] = []
+        start = 0
+        for b in self._blocks:
+            end = start + b[0].size
+            if end > n0:
+                k = max(n0 - start, 0)
+                rows.append((b[0][k:], b[1][k:], b[2][k:]))
+            start = end
+        if not rows:
+            return np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0))
+        return tuple(np.concatenate([r[i] for r in rows]) for i in range(3))
+
+    def truncate(self, n: int) -> None:
+        """Drop the samples from index ``n`` on (a stretch the run takes again)."""
+        self._flush()
+        start, kept = 0, []
+        for b in self._blocks:
+            end = start + b[0].size
+            if start < n:
+                k = min(n, end) - start
+                kept.append(tuple(x[:k] for x in b))
+            start = end
+        self._blocks, self._n = kept, min(self._n, n)
+
+    def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        self._flush()
+        if not self._blocks:
+            return np.zeros(0), np.zeros((0, nq)), np.zeros((0, nq)), np.zeros(0, int)
+        return tuple(np.concatenate([b[i] for b in self._blocks]).reshape(
+            (self._n, nq) if i in (1, 2) else (self._n,)) for i in range(4))
+
+
+class Integrator(ABC):
+    """One integration method. Subclasses set :attr:`method`, implement
+    :meth:`time_resolution` and :meth:`advance`; they may override :meth:`after_events`."""
+
+    method: str = ""
+
+    def __init__(self, model: Model, hs: HybridState, opts: RunOptions, stats: Stats):
+        self.model, self.hs, self.opts, self.stats = model, hs, opts, stats
+        self.policy = Policy(opts.v_lock, resolution=self.time_resolution(opts),
+                             gap=self.gap_resolution(opts))
+
+    @staticmethod
+    @abstractmethod
+    def time_resolution(opts: RunOptions) -> float:
+        """Shortest time between two events this method resolves, s (the event policy's
+        Zeno rule ends bounces that reach it)."""
+
+    @staticmethod
+    def gap_resolution(opts: RunOptions) -> tuple[float, float]:
+        """Smallest gap to a stop at L this method tells from its own error, as (relative
+        to |L|, absolute) in m or rad: the event policy locks a rebound that would rise
+        less (default: no such rule)."""
+        return 0.0, 0.0
+
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        """The output grid's times strictly inside (t0, t1), s: the samples a crossing of
+        a singular position records between its ends (none by default)."""
+        return np.zeros(0)
+
+    @staticmethod
+    def _grid_inside(step: float, t0: float, t1: float) -> np.ndarray:
+        """Multiples of ``step`` strictly inside (t0, t1), clear of both ends by the event
+        resolution (s)."""
+        k = np.arange(math.ceil(t0 / step), math.floor(t1 / step) + 1)
+        times = k * step
+        clear = ZENO_DT * max(1.0, abs(t1))
+        return times[(times > t0 + clear) & (times < t1 - clear)]
+
+    @abstractmethod
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        """Integrate in the configuration ``self.hs.locked`` from (t0, q, v) until
+        ``t_end`` or the next trigger, adding output samples to ``rec`` (a sample at the
+        trigger's time, before any switch, included); raise :class:`SolverError` with a
+        status on failure."""
+
+    def after_singular(self, t: float) -> None:  # noqa: B027
+        """The run goes on from time ``t`` after a singular position was crossed."""
+
+    def after_events(self, transitions: list[Transition]) -> None:  # noqa: B027
+        """Told what the policy did at the last stop (default: nothing to adjust)."""

@@ -1,0 +1,587 @@
+"""IDA (SUNDIALS, through scikit-sundae) as an :class:`~cmm_dae.integrators.contract.Integrator`.
+
+Stabilized index-2 (Gear-Gupta-Leimkuhler) form, ``y = [q, v, lambda, mu]``::
+
+    q' - v + Phi_q^T mu = 0,   M v' + Phi_q^T lambda - Q = 0,   Phi = 0,   Phi_q v + Phi_t = 0
+
+with the residual and its exact Jacobian ``dF/dy + cj dF/dy'`` evaluated through CasADi's
+buffer API straight into scikit-sundae's arrays. Each call of :meth:`IdaIntegrator.advance`
+is one IDA segment in one configuration, ended by the root of an event function of
+:mod:`cmm_dae.hybrid.policy` or by the end time.
+
+This is the only module that imports scikit-sundae.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import math
+import re
+import sys
+import warnings
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import sksundae as sun
+
+from ..core.errors import CmmError, SolverError, Status
+from ..core.records import Stats
+from ..equations.kinematics import project_state, row_names, singular_ratio
+from ..equations.model import Buffered, Model
+from ..hybrid import policy as ev
+from ..singular.step import PAST_RATIO, leaves_singular
+from . import csegment
+from .contract import Integrator, Recorder, RunOptions, SegmentEnd
+from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
+
+#: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
+#: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
+SPARSE_FROM = 300
+#: A failure where the constraints' singular-value ratio is below this and falling along
+#: the motion is handed to the singular-position crossing (which says "dead point" if it
+#: finds no singular instant ahead): at rtol 1e-12 IDA gave up on A02 at ratios up to
+#: 0.052, 0.05 s before the instant.
+FALLING_RATIO = 0.1
+#: A lock force's event function is taken from IDA's multipliers while it is farther from
+#: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
+#: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
+#: shipped models, so the margin leaves a factor of 500.
+PUSH_MARGIN = 0.1
+
+
+def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
+    if opts.output_dt is None:
+        return np.array([opts.t_end])
+    n = int(math.floor(opts.t_end / opts.output_dt + 1e-9))
+    grid = opts.output_dt * np.arange(1, n + 1)
+    # An output time just after a segment start (an event a hair before a grid time) is
+    # left out: IDA restarting toward an output 6e-11 s away failed on the double-folded
+    # mechanism and the run ended as a dead point. The event's own sample stands in.
+    grid = grid[grid > t0 + ev.ZENO_DT * max(1.0, opts.t_end)]
+    if grid.size == 0 or grid[-1] < opts.t_end - 1e-12 * opts.t_end:
+        grid = np.append(grid, opts.t_end)
+    return grid
+
+
+_LOG = logging.getLogger(__name__)  # cmm_dae.integrators.ida
+_SUNDIALS_LINE = re.compile(r"^\[\w+, Error: -?\d+\]")
+
+
+class _SundialsOut(io.TextIOBase):
+    """Standard output while IDA runs: scikit-sundae prints SUNDIALS' failure messages
+    (``[IDAHandleFailure, Error: -4] ...``, about 20 in an A02 run that succeeds) with
+    ``print``; those lines go to the logger ``cmm_dae.integrators.ida`` at debug level, every other
+    line (a user's load law printing) to the real standard output."""
+
+    def __init__(self, out):
+        self.out, self.part = out, ""
+
+    def write(self, text: str) -> int:
+        lines = (self.part + text).split("\n")
+        self.part = lines.pop()
+        for line in lines:
+            if _SUNDIALS_LINE.match(line):
+                _LOG.debug("%s", line)
+            elif line and self.out is not None:
+                self.out.write(line + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        if self.part and not _SUNDIALS_LINE.match(self.part) and self.out is not None:
+            self.out.write(self.part)
+        self.part = ""
+
+
+@contextlib.contextmanager
+def quiet_sundials():
+    """A context in which SUNDIALS' own messages go to the logger, not to stdout."""
+    out = _SundialsOut(sys.stdout)
+    try:
+        with contextlib.redirect_stdout(out):
+            yield
+    finally:
+        out.flush()
+
+
+class _StalledError(Exception):
+    """Raised inside the root function when the run's step budget is spent."""
+
+
+class _CrawlError(Exception):
+    """Raised inside the root function when IDA's steps no longer move t."""
+
+
+#: Smallest absolute tolerance of positions and velocities, relative to the largest of
+#: each at a segment's start (10 units of round-off): IDA's Newton iteration cannot meet
+#: a tolerance below the round-off of the state it solves for.
+ROUNDOFF_ATOL = 10.0 * np.finfo(float).eps
+
+#: Factor by which the round-off floor must exceed a segment's absolute tolerance for an
+#: IDA failure to count as the state having outgrown it (see ``_roundoff_atol``).
+OUTGROWN = 100.0
+
+#: Consecutive IDA steps that leave t where it was (steps below its round-off) after which
+#: the segment ends as a failure at that state. Next to a singular position IDA halved its
+#: step below t's spacing and then took about a million steps in place (A02 at rtol 1e-10
+#: from t0 = 0, where a step floor relative to t0 is zero); whether that happened hung on
+#: round-off, and it ran for an hour. The failure goes to the crossing like any other.
+IN_PLACE_STEPS = 50
+
+
+class IdaIntegrator(Integrator):
+    """IDA on the GGL index-2 residual, one solver per configuration segment."""
+
+    method = "ida"
+
+    @staticmethod
+    def time_resolution(opts: RunOptions) -> float:
+        return ev.ZENO_DT  # events are located to round-off
+
+    @staticmethod
+    def gap_resolution(opts: RunOptions) -> tuple[float, float]:
+        # IDA keeps positions to about its tolerances: a rebound whose flight rises less
+        # than that off the stop came back as a root at its apex (where the gap's gate
+        # opens on a gap within the error), not at its return, and its time's derivative
+        # was wrong (a four-bar's rocker after ten bounces: 2.08 against 0.166)
+        return opts.rtol, opts.atol
+
+    def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
+        super().__init__(model, hs, opts, stats)
+        #: IDA's unknowns (bodies pinned to the ground by their angle alone)
+        self.u = u = model.ida
+        self.t_arr = np.zeros(1)
+        self.cj_arr = np.zeros(1)
+        self.p = np.zeros(model.n_params)
+        # IDA's arrays are copied into these (bound once) rather than bound at every
+        # callback: a copy costs a third of a bind
+        self.y_in, self.yp_in, self.res_out = (np.zeros(u.N) for _ in range(3))
+        self.res = Buffered(u.res_fn)
+        for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.p)):
+            self.res.bind(i, arr)
+        self.res.bind_out(0, self.res_out)
+        self.jac: Buffered | None = None
+        self._jj: np.ndarray | None = None  # the Jacobian array the function writes into
+        # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
+        # derivatives outside it, so they keep the dense one
+        self.sparse = not model.callables and (
+            opts.linsolver == "sparse" or (opts.linsolver == "auto" and u.N >= SPARSE_FROM))
+        self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
+        self.ls_options: dict = {}
+        if self.sparse:
+            colind, row = u.jac_pattern.get_ccs()
+            self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
+                (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
+                shape=(u.N, u.N))}
+        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol), np.full(u.m, ATOL_LAMBDA),
+                                    np.full(u.m, ATOL_MU)])
+        #: factor on the multipliers' absolute tolerances, from the forces at the start
+        #: (set by the first segment)
+        self.lambda_scale = 1.0
+        self._scaled = False
+        self.ev_out = np.zeros(0)
+        self.triggers: list[ev.Trigger] = []
+        self.first_step = 0.0
+        self.relaxed = False  # multipliers still in the error test
+        self.crossed_at = math.nan  # where the last singular-position crossing ended
+        self._ev_cache: dict[tuple, Buffered] = {}
+        # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
+        # jump in the prescribed acceleration, so the run restarts there.
+        self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
+                              if d.motion == "table" and 0.0 < d.times[-1] < opts.t_end})
+
+    # ------------------------------------------------------------- callbacks
+    def _residual(self, t, y, yp, res):
+        if self.model.callables:  # the callable loads' values at this state
+            nq = self.model.nq
+            self.p[:] = self.model.fill(self.p, t, y[:nq], y[nq:2 * nq])
+        self.t_arr[0] = t
+        self.y_in[:] = y
+        self.yp_in[:] = yp
+        self.res.run()
+        res[:] = self.res_out
+
+    def _jacobian(self, t, y, yp, res, cj, JJ):
+        if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
+            self.jac = (Buffered(self.u.jac_sparse_fn, sparse=True) if self.sparse
+                        else Buffered(self.u.jac_fn))
+            for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.cj_arr, self.p)):
+                self.jac.bind(i, arr)
+        self.t_arr[0] = t
+        self.cj_arr[0] = cj
+        self.y_in[:] = y
+        self.yp_in[:] = yp
+        model = self.model
+        if model.callables:
+            nq = model.nq
+            self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
+        if JJ is not self._jj:  # one array per solver: bound once per segment
+            self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
+            self._jj = JJ
+        self.jac.run()
+        if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
+            dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
+            JJ[nq:2 * nq, :nq] -= dq
+            JJ[nq:2 * nq, nq:2 * nq] -= dv
+
+    def _events(self, t, y, yp, out):
+        # IDA checks the roots after every successful step (at the step's end, or at the
+        # output time when the step passed it): count steps here.
+        if t >= self.t_last and t not in self.outputs:
+            if t > self.t_last:
+                self.t_last, self.in_place = t, 0
+            else:  # a step too short to move t: IDA halving next to a singular position
+                self.in_place += 1
+                if self.in_place > IN_PLACE_STEPS:
+                    raise _CrawlError
+            self.n_steps += 1
+            if self.n_steps > self.step_budget:
+                raise _StalledError
+            if self.opts.progress is not None:
+                self.opts.progress.update(t)
+        out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
+        if not self.triggers:
+            return
+        self.y_in[:] = y
+        self.ev_fn.run()
+        if self.has_push and (self.relaxed or self.ev_near[0] < 0.0):
+            # Lock forces: the event function reads IDA's own multipliers, which are in the
+            # error test and tell a force's sign while it is far from its threshold; near
+            # it (or with the multipliers out of the test) the values come from a KKT solve,
+            # so a root is located on the same function as always. The two agree to well
+            # under the margin, so switching between them makes no sign change of its own.
+            q, v = self.u.centroids(y[None, :])
+            self._exact_events(t, q[0], v[0])
+        out[:] = self.ev_out
+
+    def _event_function(self) -> Buffered:
+        """The segment's event functions as one CasADi function of y: the policy's own
+        :func:`~cmm_dae.hybrid.policy.event_values` applied to symbols (one evaluation of a few
+        microseconds instead of a dozen Python calls), with a second output below zero when
+        a lock force is within the margin of its threshold. Cached per configuration."""
+        hs, model = self.hs, self.model
+        k = self.lambda_scale
+        key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
+        fn = self._ev_cache.get(key)
+        if fn is None:
+            y = ca.SX.sym("y", self.u.N)
+            q, v, lam = self.u.symbolic(y)
+            c, cd = model.cvel_fn(q, v)
+            vals: list = [None] * len(self.triggers)
+            ev.event_values(hs, c, cd, lam, self.triggers, vals, where=ca.if_else)
+            near = ca.SX(1.0)
+            if self.has_push:
+                push = ca.vertcat(*[vals[i] for i in self.push_idx])
+                near = ca.mmin(ca.fabs(push)) - (PUSH_MARGIN * ca.mmax(ca.fabs(lam))
+                                                 + 100.0 * ATOL_LAMBDA * k)
+            fn = Buffered(ca.Function("events", [y], [ca.vertcat(1.0, *vals), near]))
+            self._ev_cache[key] = fn
+        return fn
+
+    def _exact_events(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Event values with the lock forces of a KKT solve at (q, v, t)."""
+        model = self.model
+        p = model.fill(self.p, t, q, v)
+        c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
+        _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
+        ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
+
+    # ------------------------------------------------------------------ segment
+    def after_events(self, transitions: list[ev.Transition]) -> None:
+        last = transitions[-1].event if transitions else None
+        if last is not None and last.kind == "bounce":
+            c = float(self.model.joint_rates(transitions[-1].q, transitions[-1].v)[0]
+                      [self.model.jidx[last.joint]])
+            # A first step long enough that round-off in the gap cannot read as a crossing.
+            self.first_step = min(1e-6, 1e3 * np.finfo(float).eps * (1 + abs(c))
+                                  / max(abs(last.velocity_after), 1e-300))
+
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        if self.opts.output_dt is None:  # IDA's own steps: none inside a crossing
+            return np.zeros(0)
+        return self._grid_inside(self.opts.output_dt, t0, min(t1, self.opts.t_end))
+
+    def after_singular(self, t: float) -> None:
+        # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
+        # restart (order 1, small steps) fails on their error test alone.
+        self.relax_multipliers()
+        self.crossed_at = t
+
+    def relax_multipliers(self) -> None:
+        """Leave the multipliers out of IDA's error test from now on, as index-2 variables
+        usually are (the outputs' forces come from a KKT solve anyway; only the step
+        control used them: they are kept in it by default because it makes runs with
+        stops take fewer steps)."""
+        self.relaxed = True
+        self._lambda_atol()
+
+    def _lambda_atol(self) -> None:
+        nz, m = self.u.nz, self.u.m
+        self.atol[2 * nz:2 * nz + m] = lambda_atol(self.relaxed, self.lambda_scale)
+
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        model, opts, hs, u = self.model, self.opts, self.hs, self.u
+        self.p[:] = hs.p
+        if not self._scaled:  # the run's first segment: its force scale
+            self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v), True
+            self._lambda_atol()
+        first_step, self.first_step = self.first_step, 0.0
+        self.triggers = ev.event_list(model, hs.locked)
+        self.push_idx = np.array([i for i, tr in enumerate(self.triggers)
+                                  if tr.kind in ("push", "slip")], dtype=int)
+        self.has_push = self.push_idx.size > 0
+        self.ev_out = np.zeros(1 + len(self.triggers))  # [always positive, triggers]
+        self.ev_near = np.zeros(1)
+        self.ev_fn = self._event_function()
+        self.ev_fn.bind(0, self.y_in)
+        self.ev_fn.bind_out(0, self.ev_out)
+        self.ev_fn.bind_out(1, self.ev_near)
+        self.n_steps = self.in_place = 0
+        self.t_last = -math.inf
+        self.interrupted = self.stalled = self.crawled = False
+        self.step_budget = opts.max_steps - self.stats.steps
+        # A state taken from IDA's interpolant at a root satisfies the constraints only to
+        # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
+        q, v = project_state(model, q, v, t0, self.p)
+        a, lam, _ = model.kkt(q, v, t0, self.p)
+        self.ratio0 = singular_ratio(model, q, t0, self.p)
+        y0, yp0 = u.start(q, v, a, lam)
+        self._roundoff_atol(y0)
+        ne = 1 + len(self.triggers)
+        # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
+        # failure next to a singular position halved its step down to 1e-17 s and then
+        # took a million such steps in place (A02 at rtol 1e-10). With this floor it fails
+        # there, and the failure is handled as any other.
+        self.min_step = 0.25 * np.finfo(float).eps * abs(t0)
+        if first_step:
+            first_step = max(first_step, 2.0 * self.min_step)
+
+        # scikit-sundae keeps its event history on the function object: a fresh one per
+        # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
+        # callback would abort IDA and lose the segment's outputs: it is caught here and
+        # turned into a root of the always-positive first event function instead, so IDA
+        # returns what it has and the run stops with everything computed so far.
+        # An exception in the residual (a user's load law failing, say) is kept and ends
+        # the segment the same way, through the next root check; the samples after the
+        # last step completed before it are dropped.
+        self.error: Exception | None = None
+        self.t_error = math.inf  # the last step completed before the error
+
+        def eventsfn(t, y, yp, out):
+            try:
+                if self.error is None:
+                    self._events(t, y, yp, out)
+            except KeyboardInterrupt:
+                self.interrupted = True
+            except _StalledError:
+                self.stalled = self.interrupted = True
+            except _CrawlError:
+                self.crawled = self.interrupted = True
+            except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
+                self.error, self.t_error = e, self.t_last
+            if self.interrupted or self.error is not None:
+                out[:] = 1.0
+                out[0] = -1.0
+
+        def resfn(t, y, yp, res):
+            try:
+                self._residual(t, y, yp, res)
+            except KeyboardInterrupt:
+                self.interrupted = True
+                self._residual(t, y, yp, res)
+            except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
+                if self.error is None:
+                    self.error, self.t_error = e, self.t_last
+                res[:] = 0.0
+
+        eventsfn.direction = [0] + [-1] * len(self.triggers)
+        eventsfn.terminal = [True] * ne
+        with warnings.catch_warnings():  # "custom sparse Jacobian approximation will be
+            # ignored in favor of the user-defined jacfn": as intended
+            warnings.simplefilter("ignore", UserWarning)
+            solver = None if self.c is not None else sun.ida.IDA(
+                resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
+                # IDA's limit per call: what is left of the run's budget, which the root
+                # function counts across calls and ends cleanly ("stalled")
+                rtol=opts.rtol, atol=self.atol, max_num_steps=max(1, self.step_budget + 1),
+                first_step=first_step, min_step=self.min_step,
+                max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
+                algebraic_idx=list(range(2 * u.nz, u.N)),
+                **self.ls_options)
+        t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
+        outs = _output_times(opts, t0)
+        if t_stop < opts.t_end:
+            outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
+        tspan = np.concatenate([[t0], outs])
+        extra = None
+        # scikit-sundae returns IDA's internal steps for a 2-point tspan: that is what
+        # output_dt=None asks for; on a grid, a midpoint (dropped again) avoids it
+        if tspan.size == 2 and opts.output_dt is not None:
+            extra = 0.5 * (tspan[0] + tspan[1])
+            tspan = np.array([tspan[0], extra, tspan[1]])
+        # IDA evaluates the root functions at output times too: not steps
+        self.outputs = set(tspan.tolist())
+        try:
+            if self.c is not None:
+                r = self._solve_compiled(tspan, y0, yp0, first_step)
+            else:
+                with quiet_sundials():
+                    r = solver.solve(tspan, y0, yp0)
+        except CmmError:
+            raise
+        except Exception as e:  # an exception in a callback aborts IDA: say so plainly
+            raise SolverError(f"the integration failed at t = {self.t_last:.9g} s: {e}",
+                              status=Status.NUMERICAL) from e
+        self.stats.steps += self.n_steps
+        self.stats.nfev += int(r.nfev)
+        self.stats.njev += int(r.njev)
+        T, Y = np.asarray(r.t), np.asarray(r.y)
+        failed = r.status < 0 or self.crawled  # steps in place are a failure there
+        h1 = self._first_step(y0, yp0, t_stop - t0) \
+            if failed and self.error is None and not first_step else 0.0
+        if h1 > 0.0 and T[-1] - t0 < h1:
+            # IDA's own first step comes from y' and the tolerances alone: on Andrews'
+            # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
+            # (mass / h^2 beside the constraint rows) cannot be solved, and each failure
+            # only made it smaller; after A02's third crossing (40 loops, rtol 1e-11) its
+            # steps grew to 4e-8 s in all and then failed alike. A failure before one
+            # step from the accelerations is covered: again with that first step.
+            self.first_step = h1
+            return self.advance(t0, q, v, rec)
+        if failed and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
+            # IDA cannot restart where a singular-position crossing ended, even with a first
+            # step from the accelerations: still too near it; the policy takes the
+            # crossing further out
+            return SegmentEnd(t0, q, v, (), "singular")
+        if failed and self.error is None and not self.relaxed and (
+                T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
+            # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
+            # on a non-parallelogram A02 at rtol 1e-12): large or near-singular constraint
+            # sets (long chains, just past a singular position) fail on the multipliers'
+            # error test alone. Leave them out of it from here on and start again.
+            self.relax_multipliers()
+            return self.advance(t0, q, v, rec)
+        keep = np.arange(1, T.size)
+        keep = keep[T[keep] > t0]  # (a failure without a step returns t0 once more)
+        if extra is not None:
+            keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
+        if self.error is not None:  # only what was computed before the failure
+            keep = keep[T[keep] <= self.t_error]
+        # IDA's own steps (no output grid) end, at a failure, with its last time repeated
+        # (A02 at rtol 1e-10: three samples at one time before each crossing): the last
+        keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
+        Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
+        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current())
+        t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
+        if self.error is not None:
+            e = self.error
+            raise SolverError(f"the integration failed after t = "
+                              f"{self.t_error:.9g} s: "
+                              f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
+        if failed and self.error is None and T[-1] > t0 and \
+                self._roundoff_atol(Y[-1], check=True):
+            # the coordinates grew until their round-off passes the absolute tolerance (the
+            # squeezer from rest to 1400 rad/s: at rtol 1e-12, atol 1e-14 on a velocity
+            # through zero is below 3e-13 of round-off; Newton could not converge, the step
+            # collapsed to 1e-22 s and it read as a dead point): on from here with it raised
+            return SegmentEnd(t1, q1, v1, (), "restart")
+        if failed:
+            self.v_fail = v1
+            message, status, ratio = self._failure(r, t1, q1)
+            if status is Status.DEAD_POINT or (
+                    max(ratio, self.ratio0) < PAST_RATIO
+                    and leaves_singular(self.model, self.p, t1, q1, v1)):
+                # the constraints collapse ahead: let the policy try to cross (a singular
+                # position on the motion's branch), which says "dead point" if it cannot;
+                # or the segment started next to one and failed on its way out (A02 started
+                # 0.05 rad past the horizontal at rtol 1e-11), which the crossing's way
+                # out covers
+                return SegmentEnd(t1, q1, v1, (), "singular")
+            raise SolverError(message, status=status)
+        if r.status == 2 and self.stalled:
+            raise SolverError(
+                f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
+                "in this run (tiny steps: a grazing contact, a near-singular position or "
+                "forces too stiff for the tolerances); raise max_steps to go on",
+                status=Status.STALLED)
+        if r.status == 2 and self.interrupted:
+            raise KeyboardInterrupt
+        if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
+            info = np.asarray(r.i_events)[-1]
+            hit = tuple(self.triggers[i] for i in np.flatnonzero(info[1:] != 0))
+            return SegmentEnd(t1, q1, v1, hit, "event")
+        if t_stop < opts.t_end:
+            return SegmentEnd(t1, q1, v1, (), "restart")
+        return SegmentEnd(t1, q1, v1, (), "end")
+
+    def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
+        """Raise the absolute tolerances of positions and of velocities to the round-off
+        of their largest entry in ``y`` (:data:`ROUNDOFF_ATOL` of it) where the run's
+        atol is below it; True when that raises them by more than :data:`OUTGROWN` (with
+        ``check``: only tell, change nothing). A state that has grown so much since the
+        segment's start (the squeezer's spin-up, 1e-14 to 3e-10) is what IDA failed on;
+        a smaller rise (A02's speeds change by a few times near a singular position)
+        leaves the failure to the singular-position logic."""
+        nz = self.u.nz
+        cur = self.atol[:2 * nz]
+        new = np.maximum(cur, self.opts.atol)
+        for blk in (slice(0, nz), slice(nz, 2 * nz)):
+            floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
+            new[blk] = np.maximum(self.opts.atol, floor)
+        raised = bool(np.any(new > OUTGROWN * cur))
+        if not check:
+            self.atol[:2 * nz] = new
+        return raised
+
+    def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
+        """A first step (s) whose order-1 local error in the coordinates, h^2 / 2 |z''|
+        in IDA's weighted norm, is the tolerance: z'' is known at a consistent start."""
+        nz = self.u.nz
+        wt = 1.0 / (self.opts.rtol * np.abs(y0[:nz]) + self.atol[:nz])
+        norm = float(np.sqrt(np.mean((yp0[nz:2 * nz] * wt) ** 2))) if nz else 0.0
+        return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0
+
+    def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
+                        first_step: float) -> csegment.SegmentRun:
+        """The segment in C: the same IDA options, residual, Jacobian and event functions
+        (compiled) as the Python path; the step budget and Ctrl-C act between chunks."""
+        fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
+                                     self.has_push)
+        r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.opts.rtol, first_step,
+                       self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
+                       fns, len(self.triggers), self.opts.progress)
+        self.n_steps = r.steps
+        self.stalled, self.interrupted = r.stalled, r.interrupted
+        return r
+
+    def _ratio_falls(self, q: np.ndarray, tt: float, ratio: float) -> bool:
+        """Whether the constraints' singular-value ratio falls along the motion at the
+        failure (a singular position ahead, not only a badly conditioned stretch)."""
+        v = self.v_fail
+        h = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
+        return singular_ratio(self.model, q + v * h, tt + h, self.p) < ratio
+
+    def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status, float]:
+        """The message and status of IDA's failure at (tt, q), and the constraints'
+        singular-value ratio there."""
+        cfg = self.hs.configurations[self.hs.current()].label
+        # the constraint rows' conditioning at the failure against the segment's start: a
+        # dead point shows as a collapse of the smallest singular value (units mix, so
+        # only the ratio of the two says anything)
+        labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
+        # (also a failure very near one, ahead or just past it: the policy tells which)
+        if ratio < 0.2 * self.ratio0 or ratio < 0.01 or (
+                ratio < FALLING_RATIO and self._ratio_falls(q, tt, ratio)):
+            what = (f"dead point at t = {tt:.6g} s: the constraints of {row_names(labels)} "
+                    f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
+                    "cannot follow its drivers through this position")
+            status = Status.DEAD_POINT
+        else:
+            what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
+                    "tolerances may be too tight or the forces too stiff)")
+            status = Status.INTEGRATOR
+        ida = (f"{IN_PLACE_STEPS} steps too short to move t" if self.crawled
+               else f"{r.message} (status {r.status})")
+        return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio

@@ -1,0 +1,270 @@
+"""The paper's fixed-step iterative algorithm (section 3, Fig. 10) on the same equations.
+
+At each step ``t_n -> t_n + dt``:
+
+1. the differential variables (the free joint coordinates of the current configuration)
+   advance with the previous step's rates: ``c_j += c_j' dt``, ``c_j' += c_j'' dt``;
+2. the dependent coordinates follow from the position equations (Newton);
+3. the velocities from the velocity equations;
+4. accelerations, driving efforts and constraint forces from the KKT system.
+
+Limits crossed within a step and lock forces that change sign are triggers at the step's
+end, handed to the same event policy as IDA's (:mod:`cmm_dae.hybrid.policy`: clamp onto the stop,
+impact map, lock, release, Zeno rule with the step as the time resolution). The run driver
+(:func:`cmm_dae.simulate`) makes the same Result of it as of an IDA run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from ..core.errors import SolverError, Status
+from ..core.records import Stats
+from ..equations.codegen import Buffered
+from ..equations.model import Model
+from ..hybrid import policy as ev
+from .contract import Integrator, Recorder, RunOptions, SegmentEnd
+
+
+def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
+                      prefer: list[str]) -> list[str]:
+    """Choose the differential variables: non-driven, unlocked joint coordinates that span
+    the free motion best (column-pivoted QR on their rates over the null space of the
+    active constraints), the user's [initial] choice first when it is well conditioned."""
+    J = model.constraints(q, t, hs.p).Phi_q[model.active_rows(hs.p)]
+    _, s, Vt = np.linalg.svd(J)
+    rank = int(np.sum(s > 1e-10 * s[0])) if s.size else 0
+    N = Vt[rank:].T  # null space: the free motions
+    dof = N.shape[1]
+    if dof == 0:
+        return []
+    C = model.joint_coords(q, np.zeros(model.nq)).c_q @ N
+    cand = [n for n in model.joint_names if n not in model.mech.drivers and n not in hs.locked]
+    pref = [n for n in prefer if n in cand]
+    if len(pref) == dof:
+        sub = C[[model.jidx[n] for n in pref]]
+        sv = np.linalg.svd(sub, compute_uv=False)
+        if sv[-1] > 1e-6 * max(1.0, sv[0]):
+            return pref
+    rows = C[[model.jidx[n] for n in cand]]
+    # greedy pivoting: pick the coordinate with the largest remaining rate component
+    chosen: list[int] = []
+    R = rows.copy()
+    for _ in range(dof):
+        k = int(np.argmax(np.linalg.norm(R, axis=1)))
+        chosen.append(k)
+        u = R[k] / np.linalg.norm(R[k])
+        R = R - np.outer(R @ u, u)
+    return [cand[k] for k in chosen]
+
+
+class _Stepper:
+    """Kinematic solves of one configuration with fixed differential variables."""
+
+    def __init__(self, model: Model, hs: ev.HybridState, coords: list[str]):
+        self.model, self.hs, self.coords = model, hs, coords
+        self.kidx = [model.jidx[n] for n in coords]
+        self.act = model.active_rows(hs.p)
+
+    def positions(self, q0: np.ndarray, t: float, targets: np.ndarray) -> np.ndarray:
+        model, p = self.model, self.hs.p
+        q = q0.copy()
+        for _ in range(25):
+            con, c, c_q = model.kinematics(q, t, p)
+            r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
+            if np.max(np.abs(r), initial=0.0) < 1e-13:
+                return q
+            J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
+            q = q - np.linalg.solve(J, r)
+        con, c, _ = model.kinematics(q, t, p)
+        r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
+        if np.max(np.abs(r), initial=0.0) > 1e-9:
+            labels, ratio = ev.dependent_rows(model, q0, t, p, tol=1.0)
+            raise SolverError(f"dead point near t = {t:.6g} s: the position equations do not "
+                              f"converge (residual {np.max(np.abs(r)):.3g}); the constraints "
+                              f"of {', '.join(labels)} are nearly dependent at the last "
+                              f"position (singular-value ratio {ratio:.1e}): the mechanism "
+                              "cannot follow its driver here", status=Status.DEAD_POINT)
+        return q
+
+    def velocities(self, q: np.ndarray, t: float, rates: np.ndarray) -> np.ndarray:
+        model, p = self.model, self.hs.p
+        con, _, c_q = model.kinematics(q, t, p)
+        J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
+        rhs = np.concatenate([-con.Phi_t[self.act], rates])
+        return np.linalg.solve(J, rhs)
+
+
+class _CompiledStep:
+    """One whole step of a configuration (steps 1-4 above, and the event functions at its
+    end) as one CasADi function: the same equations, Newton iteration and tolerances as
+    :class:`_Stepper`, evaluated in one call instead of a dozen (the Python stepper stays
+    for Python load laws, which CasADi cannot call, and for the dead-point message)."""
+
+    def __init__(self, model: Model, hs: ev.HybridState, coords: list[str],
+                 triggers: list[ev.Trigger]):
+        nq, m, npar = model.nq, model.m, model.n_params
+        kidx = [model.jidx[n] for n in coords]
+        act = [int(i) for i in model.active_rows(hs.p)]
+        nk = len(kidx)
+        schur = bool(np.all(model.mass > 0.0) and m > 0)
+
+        def rows(x, idx):  # x[idx] (rows), with an empty selection an empty column
+            return x[idx, :] if idx else type(x)(0, x.shape[1])
+
+        # Everything but the Newton iteration and the two linear solves is SX, in four
+        # functions: MX evaluates node by node, and the step costs a third as much so.
+        S = ca.SX.sym
+        q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
+        h = tn - t
+        c, cd, cdd, _ = model.post_fn(q, v, a, t)
+        pre = ca.Function("pre", [q, v, a, t, tn], [
+            q + v * h, rows(c, kidx) + rows(cd, kidx) * h,  # the previous instant's rates
+            rows(cd, kidx) + rows(cdd, kidx) * h])
+        tar = S("tar", nk)
+        phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
+        G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act),
+                                                         rows(cz, kidx) - tar)])
+        rates = S("rates", nk)
+        vel = ca.Function("vel", [q, tn, p, tar, rates], [
+            ca.mmax(ca.fabs(G(q, tn, p, tar))), ca.vertcat(rows(Phi_q, act), rows(c_q, kidx)),
+            ca.vertcat(-rows(Phi_t, act), rates)])
+        Phi_k, Qf, gamma = model.kkt_fn(q, v, tn, p)
+        if schur:  # the Schur complement on the diagonal mass matrix (as the outputs)
+            PM = Phi_k @ ca.diag(ca.DM(1.0 / model.mass))
+            kkt = ca.Function("kkt", [q, v, tn, p], [
+                PM @ Phi_k.T - ca.diag(model.free_fn(p)), PM @ Qf - gamma])
+        else:  # point masses: the whole KKT matrix
+            kkt = ca.Function("kkt", [q, v, tn, p], [*model.kkt_system(q, v, tn, p)])
+        sol = S("sol", m if schur else nq + m)
+        lam = sol if schur else sol[nq:nq + m]
+        acc = (Qf - Phi_k.T @ sol) / ca.DM(model.mass) if schur else sol[:nq]
+        c1, cd1 = model.cvel_fn(q, v)
+        vals: list = [None] * len(triggers)
+        ev.event_values(hs, c1, cd1, lam, triggers, vals, where=ca.if_else)
+        fin = ca.Function("fin", [q, v, tn, p, sol], [acc, ca.vertcat(0.0, *vals)])
+
+        # Newton to max |r| < 1e-13 in at most 25 iterations, as _Stepper.positions
+        newton = ca.rootfinder("pos", "newton", G, {
+            "abstol": 1e-13, "abstolStep": 0.0, "max_iter": 25, "error_on_fail": False,
+            "linear_solver": "lapacklu"})  # LU with partial pivoting, as numpy.linalg.solve
+        M = ca.MX.sym
+        q, v, a, t, tn, p = M("q", nq), M("v", nq), M("a", nq), M("t"), M("tn"), M("p", npar)
+        q0, targets, rates = pre(q, v, a, t, tn)
+        q1 = newton(q0, tn, p, targets)
+        r, J, rhs = vel(q1, tn, p, targets, rates)
+        v1 = ca.solve(J, rhs, "qr")
+        A, b = kkt(q1, v1, tn, p)
+        acc, values = fin(q1, v1, tn, p, ca.solve(A, b, "qr"))
+        self.fn = Buffered(ca.Function("step", [q, v, a, t, tn, p], [q1, v1, acc, r, values]))
+
+    def __call__(self, q, v, a, t, tn, p):
+        """(q, v, a) at ``tn``, the position residual and the event values."""
+        try:
+            q1, v1, a1, r, vals = self.fn(q, v, a, t, tn, p)
+        except RuntimeError:  # a singular matrix inside (a dead point): the Python stepper
+            return q, v, a, math.inf, None  # takes the step and says what happened
+        return q1, v1, a1, float(r[0]), vals[1:]
+
+
+class IterativeIntegrator(Integrator):
+    """The paper's fixed-step algorithm, step ``dt``, output every ``output_every`` steps."""
+
+    method = "iterative"
+
+    @staticmethod
+    def time_resolution(opts: RunOptions) -> float:
+        # crossings are seen at step ends only: bounces closer than a step cannot be told
+        # apart, and the policy's Zeno rule ends them there
+        return opts.dt
+
+    def __init__(self, model: Model, hs: ev.HybridState, opts: RunOptions, stats: Stats):
+        super().__init__(model, hs, opts, stats)
+        mech = model.mech
+        self.prefer = [k for k in mech.initial.joints if k not in mech.drivers]
+        self.n_steps = steps_needed(opts.t_end, opts.dt)
+        self.n = 0  # steps taken so far: the grid is n * dt, never accumulated
+        self.coords: list[str] = []
+        self.key: tuple | None = None
+        self.st: _Stepper | None = None
+        self._steps: dict[tuple, _CompiledStep] = {}
+        self.triggers: list[ev.Trigger] | None = None  # this configuration's (None: ask)
+
+    def output_times(self, t0: float, t1: float) -> np.ndarray:
+        return self._grid_inside(self.opts.dt * self.opts.output_every, t0,
+                                 min(t1, self.opts.t_end))
+
+    def after_singular(self, t: float) -> None:
+        # go on from the grid point before t: the next step ends on the grid again
+        self.n = max(self.n, int(np.floor(t / self.opts.dt + 1e-9)))
+
+    def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        model, hs, opts = self.model, self.hs, self.opts
+        key = tuple(sorted(hs.locked.items()))
+        if key != self.key or self.st is None:  # a new configuration: choose its coordinates
+            self.coords = _free_coordinates(model, hs, q, t0, self.coords + self.prefer)
+            self.st = _Stepper(model, hs, self.coords)
+            self.key = key
+        st, k = self.st, self.st.kidx
+        cfg = hs.current()
+        fast = self._compiled_step()
+        p = hs.p
+        t = t0
+        a, _, _ = model.kkt(q, v, t, p)
+        while self.n < self.n_steps:
+            self.n += 1
+            t_new = min(self.n * opts.dt, opts.t_end)
+            h = t_new - t
+            values = None
+            if fast is not None:
+                q_new, v_new, a_new, resid, values = fast(q, v, a, t, t_new, p)
+            if fast is None or not resid < 1e-9:
+                c, cd = model.joint_rates(q, v)
+                cdd = model.joint_accelerations(q, v, a, t)
+                targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
+                rates = cd[k] + cdd[k] * h
+                try:  # (also where the compiled Newton failed: the dead-point report)
+                    q_new = st.positions(q + v * h, t_new, targets)
+                except SolverError as e:
+                    if e.status is not Status.DEAD_POINT:
+                        raise
+                    self.n -= 1  # the step is not taken: the policy crosses from (t, q, v)
+                    return SegmentEnd(t, q, v, (), "singular")
+                v_new, a_new, values = st.velocities(q_new, t_new, rates), None, None
+            q, v = q_new, v_new
+            t = t_new
+            self.stats.steps += 1
+            if opts.progress is not None:
+                opts.progress.update(t)
+            crossed = ev.crossings(hs, q, v, t, values, self.triggers)
+            if crossed:
+                rec.add(t, q, v, cfg)  # the sample before the switch
+                return SegmentEnd(t, q, v, tuple(crossed), "event")
+            a = a_new if a_new is not None else model.kkt(q, v, t, p)[0]
+            if self.n % opts.output_every == 0 or self.n == self.n_steps:
+                rec.add(t, q, v, cfg)
+        return SegmentEnd(t, q, v, (), "end")
+
+
+    def _compiled_step(self) -> _CompiledStep | None:
+        """The configuration's compiled step (cached), None with Python load laws."""
+        model, hs = self.model, self.hs
+        if model.callables:
+            return None
+        triggers = self.triggers = ev.event_list(model, hs.locked)
+        key = (tuple(self.coords), tuple(triggers), hs.mode())
+        got = self._steps.get(key)
+        if got is None:
+            got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)
+        return got
+
+
+def steps_needed(t_end: float, dt: float) -> int:
+    """Number of fixed steps to reach t_end (the last one shortened to land on it)."""
+    n = int(round(t_end / dt))
+    if abs(n * dt - t_end) > 1e-9 * t_end:
+        n = int(np.ceil(t_end / dt))
+    return max(n, 1)

@@ -1,0 +1,273 @@
+"""From states (t, q, v) to a Result: KKT solves for accelerations, efforts and forces.
+
+Efforts and constraint forces always come from a KKT solve at (q, v, t), batched over all
+samples (one mapped CasADi call and one batched ``numpy.linalg.solve``); never from an
+integrator's loosely toleranced multipliers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import Status
+from ..description.mechanism import GROUND
+from ..equations import kkt as schur
+from ..equations.model import Model
+from .result import Configuration, Event, Result, Stats
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Accelerations (n, nq), multipliers (n, m) and Phi_q (n, m, nq) at every sample.
+
+    ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
+    """
+    n, nq, m = t.size, model.nq, model.m
+    Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
+    Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
+    # a mapped output is (rows, n); with n = 1 it comes back 1-D: reshape, not transpose
+    Qf = np.asarray(Qf).reshape(-1, n).T
+    gamma = np.asarray(gamma).reshape(-1, n).T
+    free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n).T
+    if m == 0:  # no constraint at all (a free body): M a = Q
+        return Qf / model.mass, np.zeros((n, 0)), Phi_q
+    if np.all(model.mass > 0.0):
+        # The Schur complement on the diagonal mass matrix: a = M^-1 (Q - Phi_q^T lam) with
+        # (Phi_q M^-1 Phi_q^T - D) lam = Phi_q M^-1 Q - gamma, m x m instead of (nq + m)^2
+        # (about 3x faster on the double-folded mechanism); an inactive lock row (zero in
+        # Phi_q) reads -lam = 0. Point masses (zero inertia) need the whole KKT matrix.
+        lam = _schur_multipliers(model, Phi_q, Qf, gamma, free)
+        if lam is not None:
+            return (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass, lam, Phi_q
+        # a singular sample: the whole matrix, sample by sample, below
+    A = np.zeros((n, nq + m, nq + m))
+    d = np.arange(nq + m)
+    A[:, d[:nq], d[:nq]] = model.mass
+    A[:, :nq, nq:] = Phi_q.transpose(0, 2, 1)
+    A[:, nq:, :nq] = Phi_q
+    A[:, d[nq:], d[nq:]] = free
+    rhs = np.concatenate([Qf, gamma], axis=1)
+    try:
+        sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a singular sample (the state a run failed at): the
+        sol = np.array([np.linalg.lstsq(Ai, bi, rcond=None)[0]  # rest still count
+                        for Ai, bi in zip(A, rhs, strict=True)])
+    return sol[:, :nq], sol[:, nq:], Phi_q
+
+
+def _schur_multipliers(model: Model, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray,
+                       free: np.ndarray) -> np.ndarray | None:
+    """Multipliers (n, m) from the Schur complement: banded sample by sample for a large
+    mechanism, else dense and batched; None when a sample's complement is singular."""
+    st = schur.for_model(model)
+    if st is not None:
+        try:
+            return schur.solve(st, Phi_q, model.mass, Qf, gamma, free)
+        except np.linalg.LinAlgError:
+            pass  # the dense one, then the whole matrix
+    PM = Phi_q / model.mass
+    S = PM @ Phi_q.transpose(0, 2, 1)
+    d = np.arange(model.m)
+    S[:, d, d] -= free
+    rhs = np.einsum("nrk,nk->nr", PM, Qf) - gamma
+    try:
+        return np.linalg.solve(S, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,
+                        Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Multipliers and Jacobian over every row (the dropped redundant ones included): the
+    generalized force of the joint and driver rows, ``Phi_q^T lambda``, is what the
+    equations determine; among the multipliers of all those rows that give it, the one of
+    minimum norm (a redundant set's reactions are not determined by rigid-body mechanics)."""
+    n, nb = t.size, model.n_base
+    B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
+        1, 0, 2)
+    nkeep = nb - len(model.dropped)
+    G = np.einsum("nrk,nr->nk", Phi_q[:, :nkeep, :], lam[:, :nkeep])
+    # rcond: the redundant directions are zero only to round-off; cut them, not the small
+    # but real singular values near a singular position
+    lam_base = np.einsum("nrk,nk->nr", np.linalg.pinv(B.transpose(0, 2, 1), rcond=1e-10), G)
+    return (np.concatenate([lam_base, lam[:, nkeep:]], axis=1),
+            np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
+
+
+def _rows_of(model: Model, kind: str, name: str) -> list[int]:
+    """Indices in ``model.all_rows`` (the dropped redundant rows included: the
+    post-processed multipliers cover them) of one joint's, driver's or lock's rows."""
+    return [i for i, r in enumerate(model.all_rows) if r.kind == kind and r.name == name]
+
+
+#: most samples post-processed at a time (bounds the memory of the per-sample matrices)
+CHUNK = 2048
+#: bytes of Phi_q per chunk for a large model (its chunks are shorter)
+CHUNK_BYTES = 32 * 2**20
+
+
+def chunk_size(model: Model) -> int:
+    """Samples post-processed at a time: :data:`CHUNK`, or fewer (a power of two, at least
+    16) where a chunk's Phi_q would pass :data:`CHUNK_BYTES`."""
+    fit = CHUNK_BYTES // max(8 * model.m * model.nq, 1)
+    return int(min(CHUNK, max(16, 1 << max(int(fit).bit_length() - 1, 0))))
+
+
+def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray,
+             active: np.ndarray) -> dict[str, np.ndarray]:
+    """The per-sample series of one chunk of samples (see :func:`build_result`)."""
+    n = t.size
+    a, lam, Phi_q = batch_kkt(model, t, q, v, P)
+    c, cd, cdd, pts = (np.asarray(x).reshape(-1, n) for x in
+                       model.mapped("post_fn", n)(q.T, v.T, a.T, t))
+    extras = [np.asarray(x).reshape(-1, n).T
+              for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
+    phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
+    phi = np.asarray(phi_m[0]).reshape(-1, n).T
+    hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).reshape(-1, n).T
+    drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
+    drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
+
+    if model.dropped:  # redundant rows: the reactions shared out at minimum norm
+        lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
+    mech = model.mech
+
+    nj = len(model.joint_names)
+    pts = pts.reshape(2, n, nj).transpose(1, 2, 0)
+    jforce = np.zeros((n, nj, 2))
+    jtorque = np.zeros((n, nj))
+    for k, (name, j) in enumerate(mech.joints.items()):
+        rows = _rows_of(model, "joint", name) + _rows_of(model, "lock", name)
+        G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
+        ref = pts[:, k, :]
+        if j.second_body != GROUND:
+            b = model.bidx[j.second_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = F
+            jtorque[:, k] = Mc - _cross(ref - q[:, 3 * b:3 * b + 2], F)
+        else:  # action = -reaction on the first body
+            b = model.bidx[j.first_body]
+            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
+            jforce[:, k] = -F
+            jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
+    return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce,
+            "jtorque": jtorque, "drift_pos": drift_pos, "drift_vel": drift_vel,
+            "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
+            "load_value": extras[3], "load_power": extras[4]}
+
+
+def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+                 config: np.ndarray, configurations: list[Configuration],
+                 params: list[np.ndarray], events: list[Event], stats: Stats,
+                 status: Status = Status.SUCCESS, message: str = "success",
+                 event_sample: np.ndarray | None = None) -> Result:
+    """Post-process sampled states into a :class:`Result`.
+
+    Parameters
+    ----------
+    t : (n,) s; q, v : (n, nq) centroid coordinates and rates; config : (n,) indices into
+    ``configurations``; params : the parameter vector of each configuration;
+    event_sample : (n_events,) index of the sample holding the state right after each event.
+    """
+    mech = model.mech
+    n = t.size
+    P = np.array([params[c] for c in config]).reshape(n, -1)
+    if model.callables:  # the callable loads' values at each sample
+        P = np.array([model.fill(P[i], t[i], q[i], v[i]) for i in range(n)]).reshape(n, -1)
+    free = np.array([model.free_rows(p) for p in params]).reshape(len(params), model.m)
+    active = (free[config] == 0.0) if n else np.zeros((0, model.m), bool)
+    # Sample by sample in chunks of CHUNK: the per-sample matrices (Phi_q, the Schur
+    # complements) of a long run would otherwise take many times the Result's own size.
+    size = chunk_size(model)
+
+    def chunk(i: int) -> dict[str, np.ndarray]:
+        k = min(size, n - i)
+        # padded (its last sample repeated) to a power of two: the mapped functions, which
+        # cost more to build than to run on a large model, are built for few sizes
+        width = size if k == size else max(8, 1 << (k - 1).bit_length())
+        idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+        out = _samples(model, t[idx], q[idx], v[idx], P[idx], active[idx])
+        return {key: val[:k] for key, val in out.items()}
+
+    ser: dict[str, np.ndarray] = {}
+    for i in range(0, n, size):  # filled in place: no second copy of the series
+        for key, val in chunk(i).items():
+            if key not in ser:
+                ser[key] = np.empty((n, *val.shape[1:]), dtype=val.dtype)
+            ser[key][i:i + val.shape[0]] = val
+    if not n:
+        nj, ne, nld = (len(model.joint_names), len(model.element_names),
+                       len(model.load_names))
+        ser = {"a": np.zeros((0, model.nq)), "lam": np.zeros((0, len(model.all_rows))),
+               "c": np.zeros((0, nj)), "cd": np.zeros((0, nj)), "cdd": np.zeros((0, nj)),
+               "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
+               "drift_pos": np.zeros(0), "drift_vel": np.zeros(0),
+               **{k: np.zeros((0, ne)) for k in ("elem_len", "elem_rate", "elem_tension")},
+               **{k: np.zeros((0, nld)) for k in ("load_value", "load_power")}}
+    lam = ser["lam"]
+    nj = len(model.joint_names)
+    # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
+    # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
+    friction = np.zeros((n, nj))
+    for name in model.frictional:
+        k = model.joint_names.index(name)
+        fk = mech.joints[name].friction.kinetic
+        s = P[:, model.slip_slot(name)] if n else np.zeros(0)
+        row = model.n_base + model.locks.index(name)
+        lock = -lam[:, row] if n else np.zeros(0)  # the lock row's force along +c
+        side_of = np.array([dict(zip(c.locked, c.sides, strict=True)).get(name, "")
+                            for c in configurations])  # per configuration, once
+        sides = side_of[np.asarray(config, int)]
+        stuck = sides == "stick"
+        pull = ((sides == "lower") & (lock < 0)) | ((sides == "upper") & (lock > 0))
+        friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
+    effort = np.zeros((n, len(model.driver_names)))
+    for k, name in enumerate(model.driver_names):
+        effort[:, k] = -lam[:, _rows_of(model, "driver", name)[0]]
+
+    data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
+            "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],
+            "cdd": ser["cdd"], "jforce": ser["jforce"], "jtorque": ser["jtorque"],
+            "effort": effort, "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
+            "friction": friction,
+            **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
+                                   "load_power")},
+            "event_sample": (np.asarray(event_sample, int) if event_sample is not None
+                             else np.zeros(0, int))}
+    meta = {
+        "mechanism": mech.name,
+        "source": mech.source,
+        "bodies": model.body_names,
+        "centroids": [list(b.centroid) for b in mech.bodies.values()],
+        "masses": model.mass.tolist(),
+        "joints": model.joint_names,
+        "joint_types": [j.type for j in mech.joints.values()],
+        "drivers": model.driver_names,
+        "rows": [f"{r.kind} {r.name}" for r in model.all_rows],
+        # rows left out of the equations as redundant; their reactions (and those of the
+        # rows they depend on) are the minimum-norm solution
+        "redundant": [f"{model.all_rows[i].kind} {model.all_rows[i].name}"
+                      for i in model.dropped],
+        "gravity": list(mech.gravity),
+        "springs": {n: [j.spring.stiffness, j.spring.rest] for n, j in mech.joints.items()
+                    if j.spring is not None},
+        "dampers": {n: j.damper.damping for n, j in mech.joints.items() if j.damper is not None},
+        "metamorphic": mech.limited_joints,
+        "elements": {n: [e.stiffness, e.rest, e.damping, e.preload]
+                     for n, e in mech.elements.items()},
+        "loads": model.load_names,
+        "frictional": model.frictional,
+        "body_points": {n: {k: list(v) for k, v in b.points.items()}
+                        for n, b in mech.bodies.items()},
+        "ground": {k: list(v) for k, v in mech.ground.items()},
+        "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
+        # for drawings: guides of prismatic joints and the stops of metamorphic joints
+        "axes": {n: list(j.axis) for n, j in mech.joints.items() if j.type == "prismatic"},
+        "limits": {n: [j.limits.lower, j.limits.upper] for n, j in mech.joints.items()
+                   if j.limits is not None},
+    }
+    return Result(meta, data, configurations, events, stats, status, message)

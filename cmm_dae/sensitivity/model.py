@@ -1,0 +1,179 @@
+"""The CasADi functions of the sensitivity pass (:mod:`cmm_dae.sensitivity`): the
+augmented residual (state and sensitivities), the KKT system and the impact map as implicit
+functions with their derivatives, the constraints, the joint coordinates, the Result's
+joint and driver series, and the policy's event functions with the parameters symbolic."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..description.mechanism import GROUND
+from ..equations.model import Buffered, Model, kkt_blocks
+from ..hybrid import policy as ev
+from ..hybrid.state import HybridState, SegmentTrace
+
+__all__ = ["Equations"]
+
+
+class _Mat(Buffered):
+    """A :class:`Buffered` function whose outputs are always 2-D, shaped as CasADi's
+    (a column stays a column, a row a row, whatever the number of parameters)."""
+
+    def __call__(self, *args) -> list[np.ndarray]:
+        return [np.reshape(o, s) for o, s in zip(super().__call__(*args), self.shapes,
+                                                  strict=True)]
+
+
+class Equations:
+    """The CasADi functions of the sensitivity pass, built once per model."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        sy = model.sym
+        q, v, t, p, th = sy["q"], sy["v"], sy["t"], sy["p"], sy["theta"]
+        y, yp, F = sy["y"], sy["yp"], sy["F"]
+        nq, m, N, P = model.nq, model.m, model.N, model.theta.numel()
+        self.P = P
+        npar = model.n_params
+        # --- augmented residual: [F; F_y S + F_y' S' + F_p dP + F_theta]
+        S = ca.SX.sym("S", N, P)
+        Sp = ca.SX.sym("Sp", N, P)
+        dP = ca.SX.sym("dP", npar, P)
+        Fs = (ca.jacobian(F, y) @ S + ca.jacobian(F, yp) @ Sp + ca.jacobian(F, p) @ dP
+              + ca.jacobian(F, th))
+        Y = ca.vertcat(y, ca.vec(S))
+        Yp = ca.vertcat(yp, ca.vec(Sp))
+        Fa = ca.vertcat(F, ca.vec(Fs))
+        cj = ca.SX.sym("cj")
+        J = ca.jacobian(Fa, Y) + cj * ca.jacobian(Fa, Yp)
+        self.res = ca.Function("sres", [t, Y, Yp, p, ca.vec(dP), th], [Fa])
+        self.jac = ca.Function("sjac", [t, Y, Yp, cj, p, ca.vec(dP), th], [ca.densify(J.T)])
+        # --- KKT system K z = r, z = [a; lambda], and its derivatives
+        z = ca.SX.sym("z", nq + m)
+        K = kkt_blocks(sy["mass"], sy["Phi_q"], sy["free"])
+        R = K @ z - ca.vertcat(sy["Qf"], sy["gamma"])
+        dn = ca.densify
+        self.kkt = _Mat(ca.Function("skkt", [q, v, t, p, th, z], [dn(K)] + [
+            dn(ca.jacobian(R, x)) for x in (q, v, t, p, th)]))
+        # --- impact map: K [v+; Lambda] = [M v-; b], b the velocity targets
+        vm = ca.SX.sym("vm", nq)
+        erow = ca.SX.sym("erow", m)
+        tgt = ca.SX.sym("tgt")
+        b = -sy["Phi_t"] * (1 - sy["free"]) * (1 - erow) + erow * tgt
+        Ri = K @ z - ca.vertcat(sy["mass"] * vm, b)
+        self.imp = _Mat(ca.Function("simp", [q, vm, t, p, th, erow, tgt, z], [dn(K)] + [
+            dn(ca.jacobian(Ri, x)) for x in (q, vm, t, p, th, tgt)]))
+        # the rebound target -e c'_k of a joint (onehot over joints)
+        onehot = ca.SX.sym("oh", len(model.joint_names))
+        e = ca.vertcat(*[j.restitution for j in model.smech.joints.values()])
+        target = -ca.dot(onehot, e) * ca.dot(onehot, sy["cdot"])
+        self.tgt = _Mat(ca.Function("stgt", [q, v, th, onehot], [target] + [
+            dn(ca.jacobian(target, x)) for x in (q, v, th)]))
+        # --- constraints (positions, velocities) and their derivatives
+        phi, h = sy["phi"], sy["h"]
+        self.pos = _Mat(ca.Function("spos", [q, t, p, th], [dn(x) for x in (
+            phi, sy["Phi_q"], sy["Phi_t"], ca.jacobian(phi, p), ca.jacobian(phi, th))]))
+        self.vel = _Mat(ca.Function("svel", [q, v, t, p, th], [dn(x) for x in (
+            h, ca.jacobian(h, q), sy["Phi_q"], ca.jacobian(h, p), ca.jacobian(h, th))]))
+        # --- joint coordinates and rates
+        c, cd = sy["c"], sy["cdot"]
+        self.coords = _Mat(ca.Function("scoord", [q, v, th], [dn(x) for x in (
+            c, cd, sy["c_q"], ca.jacobian(cd, q), ca.jacobian(c, th), ca.jacobian(cd, th))]))
+        # --- outputs: c, c', c'', joint forces, torques, efforts
+        a = sy["a"]
+        lam = ca.SX.sym("lamo", m)
+        out = self._outputs(lam)
+        self.n_out = out.numel()
+        self.out = _Mat(ca.Function("sout", [q, v, a, p, th, lam], [dn(out)] + [
+            dn(ca.jacobian(out, x)) for x in (q, v, a, th, lam)]))
+        self._events: dict[tuple, Buffered] = {}
+        self._singular: _Mat | None = None
+
+    def _outputs(self, lam) -> ca.SX:
+        """The Result's joint and driver series as one vector (post-processing's
+        definitions: force of the first body on the second at the second's point)."""
+        model = self.model
+        sy = model.sym
+        q = sy["q"]
+        Phi_q = sy["Phi_q"]
+        fx, fy, tq = [], [], []
+        Pts = sy["P"]
+        for k, (name, j) in enumerate(model.mech.joints.items()):
+            rows = model.rows_of("joint", name) + model.rows_of("lock", name)
+            G = -(Phi_q[rows, :].T @ lam[rows]) if rows else ca.SX.zeros(model.nq)
+            ref = Pts[:, k]
+            second = j.second_body != GROUND
+            b = model.bidx[j.second_body if second else j.first_body]
+            F, Mc = G[3 * b:3 * b + 2], G[3 * b + 2]
+            rb = q[3 * b:3 * b + 2]
+            if second:
+                fx.append(F[0])
+                fy.append(F[1])
+                d = ref - rb
+                tq.append(Mc - (d[0] * F[1] - d[1] * F[0]))
+            else:
+                fx.append(-F[0])
+                fy.append(-F[1])
+                d = rb - ref
+                tq.append(-(Mc + (d[0] * F[1] - d[1] * F[0])))
+        eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
+        force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
+        return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, *tq, *eff)
+
+    def singular_function(self) -> _Mat:
+        """``g = w . (Phi_q n)`` for a left and right null vector ``w``, ``n`` of the
+        constraint Jacobian at a singular position, held fixed: it changes sign where the
+        motion passes the position (the collapsing singular value, signed), so the
+        instant's derivative follows from it as from an event function.
+        (q, t, p, theta, w, n) -> (g, g_q, g_t, g_p, g_theta)."""
+        if self._singular is None:
+            model = self.model
+            sy = model.sym
+            w, n = ca.SX.sym("w", model.m), ca.SX.sym("n", model.nq)
+            g = ca.dot(w, sy["Phi_q"] @ n)
+            self._singular = _Mat(ca.Function("ssing", [sy["q"], sy["t"], sy["p"],
+                                                        sy["theta"], w, n], [g] + [
+                ca.densify(ca.jacobian(g, sy[x])) for x in ("q", "t", "p", "theta")]))
+        return self._singular
+
+    def event_function(self, seg: SegmentTrace, trig: ev.Trigger) -> Buffered:
+        """The event function of ``trig`` in segment ``seg``'s configuration, as the
+        policy defines it, with the parameters symbolic: (g, g_q, g_v, g_theta, g_lam)."""
+        key = (trig, tuple(sorted(seg.locked.items())), seg.zones,
+               tuple(sorted(seg.slip.items())))
+        fn = self._events.get(key)
+        if fn is None:
+            model = self.model
+            sy = model.sym
+            lam = ca.SX.sym("lamg", model.m)
+            hs = _SymbolicState(model, locked=dict(seg.locked), zones=seg.zones,
+                                slip=dict(seg.slip), stick_at=dict(seg.stick_at))
+            out = [None]
+            ev.event_values(hs, sy["c"], sy["cdot"], lam, [trig], out, where=ca.if_else)
+            g = ca.SX(out[0])
+            fn = self._events[key] = _Mat(ca.Function(
+                "sev", [sy["q"], sy["v"], sy["theta"], lam],
+                [g] + [ca.densify(ca.jacobian(g, x)) for x in (sy["q"], sy["v"], sy["theta"],
+                                                              lam)]))
+        return fn
+
+
+@dataclass
+class _SymbolicState(HybridState):
+    """The policy's state with the mechanism's thresholds (stop positions, static
+    friction) read from the model's symbolic parameters: the event functions of
+    :func:`~cmm_dae.hybrid.policy.event_values` as functions of them."""
+
+    def limit_value(self, joint: str, side: str):
+        if side == "stick":
+            return self.stick_at[joint]
+        lim = self.model.smech.joints[joint].limits
+        return lim.lower if side == "lower" else lim.upper
+
+    def static(self, joint: str):
+        f = self.model.smech.joints[joint].friction
+        return f.static if f is not None else 0.0
+

@@ -1,0 +1,106 @@
+"""The options of a run, checked once for every method: all problems reported at once as
+one :class:`~cmm_dae.core.errors.ModelError` under ``[run]``."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..core.errors import ModelError, Problem
+from ..description.mechanism import Mechanism
+from ..hybrid import policy as ev
+from ..integrators.contract import RunOptions
+
+#: The integration methods, by name (the classes are the runner's).
+METHOD_NAMES = ("ida", "iterative")
+
+#: Most memory the output samples of one run may take (their post-processed arrays), bytes.
+MAX_OUTPUT_BYTES = 4 * 2**30
+#: Default run-wide step budget per simulated second (at least 500,000 in all).
+STEPS_PER_SECOND = 50_000
+
+
+def _is_num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: Any,
+                  output_dt: Any, dt: Any, output_every: Any, max_events: Any, v_lock: Any,
+                  max_steps: Any) -> RunOptions:
+    """Every run option checked up front; one :class:`ModelError` lists all problems."""
+    bad: list[Problem] = []
+
+    def need(ok: bool, key: str, msg: str, value: Any) -> bool:
+        if not ok:
+            bad.append(Problem("run", key, f"{msg}, got {value!r}"))
+        return ok
+
+    if method not in METHOD_NAMES:
+        bad.append(Problem("run", "method", f"expected one of {', '.join(METHOD_NAMES)}, "
+                           f"got {method!r}"))
+    ok_t = need(_is_num(t_end) and math.isfinite(t_end) and t_end > 0, "t_end",
+                "expected a positive end time in s", t_end)
+    if ok_t and method == "ida" and t_end < ev.ZENO_DT:
+        # IDA's first steps would be ~1e-24 s, where the index-2 Newton matrix (mass / h
+        # beside the constraint rows) cannot be solved: it failed at t = 0 on a four-bar
+        # below 1e-13 s. Shorter than the events' resolution, such a run says nothing.
+        ok_t = need(False, "t_end", f"expected at least {ev.ZENO_DT:g} s with IDA (the "
+                    "run's time resolution; the fixed-step algorithm takes any end time)", t_end)
+    ok_rtol = need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol",
+                   "expected 1e-15 <= rtol <= 1e-2", rtol)
+    if atol is None and ok_rtol:
+        atol = 1e-2 * rtol  # tighter with rtol (a fixed atol caps it where y passes 0)
+    need((atol is None and not ok_rtol) or (_is_num(atol) and 0 < atol <= 1e-2), "atol",
+         "expected 0 < atol <= 1e-2 or None", atol)
+    ok_out = need(output_dt is None or (_is_num(output_dt) and math.isfinite(output_dt)
+                                        and output_dt > 0),
+                  "output_dt", "expected a positive step in s or None", output_dt)
+    ok_dt = need(_is_num(dt) and math.isfinite(dt) and dt > 0, "dt",
+                 "expected a positive step in s", dt)
+    ok_every = need(isinstance(output_every, int) and not isinstance(output_every, bool)
+                    and output_every >= 1, "output_every", "expected an integer >= 1",
+                    output_every)
+    need(isinstance(max_events, int) and not isinstance(max_events, bool) and max_events >= 0,
+         "max_events", "expected an integer >= 0", max_events)
+    need(_is_num(v_lock) and math.isfinite(v_lock) and v_lock >= 0, "v_lock",
+         "expected a speed >= 0 (rad/s or m/s)", v_lock)
+    ok_steps = need(max_steps is None or (isinstance(max_steps, int)
+                                          and not isinstance(max_steps, bool)
+                                          and max_steps >= 1),
+                    "max_steps", "expected an integer >= 1 or None", max_steps)
+    if ok_t and ok_steps and max_steps is None:
+        max_steps = max(500_000, int(min(STEPS_PER_SECOND * t_end, 2**62)))
+    if ok_t and ok_dt and ok_steps and method == "iterative":
+        n = t_end / dt
+        if n > max_steps:
+            bad.append(Problem("run", "dt", f"{dt!r} s would take {n:.3g} fixed steps to "
+                               f"t_end = {t_end!r} s, more than max_steps = {max_steps}; "
+                               "take a larger step or raise max_steps"))
+    if ok_t and ok_out and ok_dt and ok_every and not bad:
+        n = (t_end / output_dt if method == "ida" and output_dt is not None else
+             t_end / dt / output_every if method == "iterative" else 0.0)
+        nb, nj = len(mech.bodies), len(mech.joints)
+        per = 8 * (9 * nb + 2 * nj + 2 * len(mech.drivers) + 7 * nj + 8)
+        if n * per > MAX_OUTPUT_BYTES:
+            key = "output_dt" if method == "ida" else "output_every"
+            bad.append(Problem("run", key, f"{n:.3g} output samples would take "
+                               f"{n * per / 2**30:.3g} GiB, more than the "
+                               f"{MAX_OUTPUT_BYTES / 2**30:g} GiB cap; sample more coarsely"))
+    if bad:
+        raise ModelError(bad)
+    return RunOptions(float(t_end), float(rtol), float(atol),
+                      None if output_dt is None else float(output_dt), float(dt),
+                      output_every, max_events, float(v_lock), int(max_steps))
+
+
+def branch_rule(mech: Mechanism, branch: Any) -> tuple[str, int] | None:
+    """The checked branch option: None for "continue", else (joint, +1 or -1)."""
+    if isinstance(branch, str) and branch == "continue":
+        return None
+    ok = (isinstance(branch, tuple | list) and len(branch) == 2 and branch[0] in mech.joints
+          and branch[1] in (1, -1) and not isinstance(branch[1], bool))
+    if not ok:
+        raise ModelError(Problem("run", "branch", f"expected \"continue\" or (joint, +1 or "
+                                 f"-1) with a joint of the mechanism "
+                                 f"({', '.join(mech.joints)}), got {branch!r}"))
+    return str(branch[0]), int(branch[1])

@@ -1,0 +1,281 @@
+"""Singular positions IDA stepped over without stopping, found afterwards in its samples.
+
+IDA integrates through a singular position on the branch of the motion whenever its steps
+happen to straddle the instant (at rtol 1e-8 it does so at most of them): the motion is
+smooth there, only the constraint Jacobian loses rank for an instant. Every segment's
+samples are searched for such a passage: a dip of the constraints' singular-value ratio
+that the cubic Hermite interpolant of the samples (positions and their rates) takes close
+to zero. Under ``branch = "continue"`` it is logged as it is (:func:`stepped_over`); a
+branch rule has to be applied *at* the instant, so the run goes back to the last sample
+before it and crosses it as if IDA had stopped there (:func:`watch_segment`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from ..equations.kinematics import singular_ratio
+from ..equations.model import Model
+from ..integrators.contract import Recorder, SegmentEnd
+from ..singular.instant import hermite
+
+#: A sample whose singular-value ratio is a local minimum below this is looked at closely.
+WATCH_RATIO = 0.3
+#: ... and the motion passes a singular position where the interpolant's ratio falls below
+#: this (it falls linearly to zero at the instant; elsewhere a well-posed mechanism stays
+#: far above it).
+PASSAGE_RATIO = 1e-3
+#: The crossing starts from the last sample before the passage whose ratio is at least
+#: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
+START_RATIO = 0.01
+#: Points per sample interval at which the interpolant's ratio is evaluated.
+POINTS = 64
+
+
+#: A sample is looked at when log det(J J^T) there is at least this much below that of
+#: one of its neighbours (the ratio at most 0.6 of the neighbour's: a passage gives a
+#: third or less).
+DIP = 2.0 * math.log(1.0 / 0.6)
+#: Samples whose constraint Jacobians are screened in one mapped evaluation.
+CHUNK = 256
+
+
+@dataclass(frozen=True)
+class Passage:
+    """A singular position between two samples of a segment (indices into the samples
+    searched, the segment's start first)."""
+
+    start: int  #: the last sample before it whose ratio is at least :data:`START_RATIO`
+    interval: int  #: it lies between samples ``interval`` and ``interval + 1``
+    t: float  #: the singular instant on the samples' interpolant, s
+    ratio: float  #: the interpolant's singular-value ratio there
+
+
+def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
+              act: np.ndarray) -> np.ndarray:
+    """log det(J J^T) of the active rows' Jacobian J at every sample (-inf where it is
+    singular): a measure that dips where the ratio dips, at a fraction of the SVDs' cost
+    (1.4 against 11.6 ms on the double-folded cycle's 1005 samples, 96 against 487 ms on
+    102 samples of A02 with 40 loops), evaluated in chunks of one mapped function."""
+    n = t.size
+    fn = model.mapped("phi_fn", CHUNK)
+    out = np.empty(n)
+    P = np.repeat(p[:, None], CHUNK, axis=1)
+    for k in range(0, n, CHUNK):
+        m = min(CHUNK, n - k)
+        qk = np.empty((model.nq, CHUNK))
+        tk = np.empty(CHUNK)
+        qk[:, :m], tk[:m] = q[k:k + m].T, t[k:k + m]
+        qk[:, m:], tk[m:] = qk[:, m - 1:m], tk[m - 1]  # padding, dropped
+        J = np.asarray(fn(qk, tk, P)[1]).reshape(model.m, CHUNK, model.nq)
+        J = J.transpose(1, 0, 2)[:m, act, :]
+        sign, logdet = np.linalg.slogdet(J @ J.transpose(0, 2, 1))
+        out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
+    return out
+
+
+def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+             first: bool = False, ends_open: bool = False) -> list[Passage]:
+    """The singular positions the samples of one segment pass, in time order.
+
+    Parameters
+    ----------
+    model, p : Model, ndarray
+        The equations and the configuration's parameters.
+    t : ndarray, (n,)
+        Sample times of one IDA segment, s, its start first (distinct and increasing).
+    q, v : ndarray, (n, nq)
+        Positions and velocities there.
+    first : bool
+        Stop at the first one found.
+    ends_open : bool
+        Also take a dip below :data:`PASSAGE_RATIO` that reaches a sample itself, as at
+        the end of a segment stopped short of the instant (else the interpolant's ratio
+        must fall below half that at both ends of its interval).
+
+    Returns
+    -------
+    list of Passage
+        Where the samples' cubic Hermite interpolant takes the constraints' singular-value
+        ratio below :data:`PASSAGE_RATIO`, next to a sample where the ratio has a local
+        minimum below :data:`WATCH_RATIO`.
+    """
+    n = t.size
+    if n < 2:
+        return []
+    ratios: dict[int, float] = {}
+
+    def r(i: int) -> float:  # the exact ratio, where it is needed
+        if i not in ratios:
+            ratios[i] = singular_ratio(model, q[i], float(t[i]), p)
+        return ratios[i]
+
+    act = model.active_rows(p)
+    if 0 < act.size <= model.nq:
+        # the samples where the ratio may dip to zero: the segment's ends, and local
+        # minima of log det(J J^T) well below one neighbour. Next to a passage the
+        # smallest singular value falls linearly to zero, so the sample nearer the
+        # instant has at most a third of the farther neighbour's (a drop of 2 ln 3 in
+        # the log determinant, the other singular values unchanged); where the
+        # determinant is flat, round-off makes local minima everywhere.
+        d = _log_gram(model, p, t, q, act)
+        lo_d, hi_d = np.append(d[0], d[:-1]), np.append(d[1:], d[-1])
+        dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
+        candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
+        # an end: where the ratio falls towards it and, on the two samples beside it
+        # extended linearly, reaches zero within an interval of it
+        for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
+            if b < 0 or b >= n:
+                candidates.append(end)
+                continue
+            slope = (r(b) - r(a)) / (t[b] - t[a])
+            zero = t[a] - r(a) / slope if slope != 0.0 else math.inf
+            reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
+            if r(end) <= r(a) and abs(zero - t[end]) <= reach:
+                candidates.append(end)
+    else:  # no rows, or more than coordinates: every sample, as the ratio says
+        candidates = list(range(n))
+    s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
+    found: list[Passage] = []
+    searched: set[int] = set()
+    dips: set[int] = set()
+    for i in candidates:
+        # down the exact ratio to its own local minimum (next to the determinant's,
+        # where the other singular values change fast)
+        for _ in range(2):
+            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+            k = min((lo, i, hi), key=r)
+            if r(k) >= r(i):
+                break
+            i = k
+        if r(i) < WATCH_RATIO:
+            dips.add(i)
+    for i in sorted(dips):
+        lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+        best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
+        # the intervals on either side of the dipping sample: the instant is where the
+        # interpolant's ratio is smallest (next to the sample the other side's approaches
+        # the sample's own ratio, which can be below PASSAGE_RATIO already)
+        for a in range(lo, hi):
+            if a in searched or t[a + 1] <= t[a]:
+                continue
+            searched.add(a)
+            ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
+
+            def at(x: float, ends: tuple = ends) -> float:  # x: fraction of the interval
+                tx = float(ends[0] + x * (ends[3] - ends[0]))
+                return singular_ratio(model, hermite(*ends, tx)[0], tx, p)
+
+            rs = np.array([at(x) for x in s])
+            k = int(np.argmin(rs))
+            # the ratio dips in a V to zero: the grid may step over its tip, a bounded
+            # search between the grid's neighbours finds it
+            lo_s = s[k - 1] if k > 0 else 0.0
+            hi_s = s[k + 1] if k < s.size - 1 else 1.0
+            opt = minimize_scalar(at, bounds=(lo_s, hi_s), method="bounded",
+                                  options={"xatol": 1e-9})
+            x, r_min = (float(opt.x), float(opt.fun)) if opt.fun < rs[k] \
+                else (float(s[k]), float(rs[k]))
+            # inside the interval, below both its ends (not an end that starts low and
+            # rises, as a segment can right after a crossing), unless the segment may
+            # have stopped short of the instant
+            inside = ends_open or r_min < 0.5 * min(r(a), r(a + 1))
+            if inside and (best is None or r_min < best[0]):
+                best = (r_min, x, a)
+        if best is not None and best[0] < PASSAGE_RATIO:
+            r_min, x, a = best
+            j = a
+            while j > 0 and r(j) < START_RATIO:
+                j -= 1
+            found.append(Passage(j, a, float(t[a] + x * (t[a + 1] - t[a])), r_min))
+            if first:
+                return found
+    return sorted(found, key=lambda ps: ps.t)
+
+
+def _samples(t: float, q: np.ndarray, v: np.ndarray, rec: Recorder, n0: int,
+             end: SegmentEnd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A segment's samples, its start first and its end last (neither is in ``rec``
+    where the segment starts after an event or stops short of its last sample)."""
+    ts, qs, vs = rec.since(n0)
+    ts, qs, vs = [np.concatenate([[a], b]) for a, b in ((t, ts), (q, qs), (v, vs))] \
+        if ts.size else (np.array([t]), q[None], v[None])
+    if end.t > ts[-1]:
+        ts, qs, vs = (np.append(ts, end.t), np.vstack([qs, end.q]), np.vstack([vs, end.v]))
+    return ts, qs, vs
+
+
+def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                rec: Recorder, n0: int, end: SegmentEnd, last: bool = False
+                ) -> tuple[int, SegmentEnd] | None:
+    """Where a segment would be cut back to cross a singular position its samples pass.
+
+    Parameters
+    ----------
+    model, p : Model, ndarray
+        The equations and the configuration's parameters.
+    t, q, v : float, ndarray, ndarray
+        The segment's start (s, positions, velocities).
+    rec : Recorder
+        The run's samples; the segment's are those from index ``n0`` on.
+    n0 : int
+        Index of the segment's first sample in ``rec``.
+    end : SegmentEnd
+        How the segment ended.
+    last : bool
+        Cut back before the last passage (where the integrator gave up next to one), not
+        the first.
+
+    Returns
+    -------
+    tuple of (int, SegmentEnd) or None
+        The number of samples to keep and the segment's new end (reason ``"singular"``,
+        at the last sample before the passage), None when the samples pass none.
+        Nothing is changed: the caller truncates ``rec``.
+    """
+    ts, qs, vs = _samples(t, q, v, rec, n0, end)
+    found = passages(model, p, ts, qs, vs, first=not last, ends_open=True)
+    if not found:
+        return None
+    j = found[-1].start
+    return n0 + j, SegmentEnd(float(ts[j]), qs[j].copy(), vs[j].copy(), (), "singular")
+
+
+def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                 rec: Recorder, n0: int, end: SegmentEnd
+                 ) -> list[tuple[Passage, int, np.ndarray, np.ndarray, float]]:
+    """The singular positions IDA integrated through inside one segment, to be logged.
+
+    Parameters are those of :func:`passage_cut`. Returns, in time order, each passage
+    with the index in ``rec`` of the first sample after it, the interpolated positions
+    and velocities at its instant and the singular-value ratio at the sample its search
+    started from. One in the segment's last interval is left out when the segment ended
+    at a singular position: the crossing from there takes it.
+    """
+    ts, qs, vs = _samples(t, q, v, rec, n0, end)
+    out = []
+    for ps in passages(model, p, ts, qs, vs):
+        after = n0 + ps.interval  # ts[k] is rec[n0 + k - 1]
+        if after >= len(rec) or (end.reason == "singular" and ps.interval == ts.size - 2):
+            continue
+        a = ps.interval
+        qs_, vs_ = hermite(ts[a], qs[a], vs[a], ts[a + 1], qs[a + 1], vs[a + 1], ps.t)
+        j = ps.start
+        out.append((ps, after, qs_, vs_, singular_ratio(model, qs[j], float(ts[j]), p)))
+    return out
+
+
+def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                  rec: Recorder, n0: int, end: SegmentEnd) -> SegmentEnd:
+    """With a branch rule: the segment cut back to the last sample before a singular
+    position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
+    meets it again), to be crossed there; else the segment's end as it was."""
+    cut = passage_cut(model, p, t, q, v, rec, n0, end)
+    if cut is None:
+        return end
+    rec.truncate(cut[0])
+    return cut[1]

@@ -1,0 +1,341 @@
+"""The one run driver: ``simulate(mech, method="ida" | "iterative", ...)``.
+
+It owns, once for every method, what a run is: checking the options, building the model,
+the consistent initial state, the hybrid loop's bookkeeping (the event policy of
+:mod:`cmm_dae.hybrid.policy` applied to whatever the integrator detected, one output sample after
+every event), failure wrapping (every exception inside a run becomes a
+:class:`~cmm_dae.core.errors.SolverError` carrying the partial Result) and the Result itself.
+An integrator (:mod:`cmm_dae.integrators.ida`, :mod:`cmm_dae.integrators.iterative`) only
+advances the state to the end time or to the next trigger.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+
+import numpy as np
+
+from ..core.errors import AssemblyError, CmmError, ModelError, SolverError, Status
+from ..core.progress import Bar
+from ..core.records import Stats
+from ..description.mechanism import Mechanism, require_mechanism
+from ..description.structure import force_constraint_joints, labeller
+from ..equations.model import Model
+from ..hybrid import policy as ev
+from ..hybrid.equilibrium import solve_equilibrium
+from ..hybrid.start import redundant_base_rows, start_state
+from ..integrators.contract import Integrator, Recorder, RunOptions
+from ..integrators.ida import IdaIntegrator
+from ..integrators.iterative import IterativeIntegrator
+from ..results.post import build_result
+from ..results.result import Result
+from .crossing import cross_singular, log_stepped_over
+from .options import branch_rule, check_options
+from .passage import passage_cut, watch_segment
+
+#: The integration methods, by name.
+METHODS: dict[str, type[Integrator]] = {"ida": IdaIntegrator, "iterative": IterativeIntegrator}
+
+#: Two records of a singular instant closer than this (relative to the time, s) are one.
+TWIN_INSTANT = 1e-6
+
+_BLAS = None
+
+
+def _one_blas_thread():
+    """A context with one BLAS thread: the package's systems are small, and on a busy
+    2-core machine OpenBLAS's default threads turned a 0.47 s run into 5.3 s."""
+    global _BLAS
+    from threadpoolctl import ThreadpoolController
+
+    if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
+def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
+             rtol: float = 1e-8, atol: float | None = None, output_dt: float | None = 0.01,
+             dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
+             v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
+             model: Model | None = None, progress: bool = False,
+             branch: str | tuple[str, int] = "continue", compiled: bool = False,
+             linsolver: str = "auto", _trace: list | None = None) -> Result:
+    """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        The mechanism (:func:`cmm_dae.load` reads one from TOML).
+    t_end : float
+        End time, s (with IDA at least 1e-9 s, the run's time resolution).
+    method : {"ida", "iterative"}
+        SUNDIALS IDA on the index-2 DAE, or the paper's fixed-step iterative algorithm.
+    rtol : float
+        IDA: relative tolerance.
+    atol : float or None
+        IDA: absolute tolerance on positions (m, rad) and velocities (m/s, rad/s); None:
+        1e-2 of ``rtol`` (1e-10 at the default rtol), so that a tighter rtol is not
+        capped by a fixed atol where a coordinate passes zero (IFToMM A01 over 50 s at
+        rtol 1e-11: 1.5e-6 m with atol 1e-10, 1.2e-7 to 2.1e-7 m with 1e-13).
+    output_dt : float or None
+        IDA: output spacing, s (None: IDA's own steps). Event times are always added.
+    dt : float
+        Iterative: the fixed step, s (the paper uses 0.01 s).
+    output_every : int
+        Iterative: keep every k-th step (events are always kept).
+    max_events : int
+        Stop with :class:`SolverError` after this many events.
+    v_lock : float
+        A rebound slower than this (rad/s or m/s) locks the joint.
+    max_steps : int or None
+        Most steps in the whole run (default: 50,000 per simulated second, at least
+        500,000): beyond it IDA stops with a "stalled" :class:`SolverError` and its partial
+        Result instead of crawling on; a fixed step that would need more is refused.
+    throw : bool
+        Raise :class:`SolverError` on failure (True) or return the partial Result with
+        ``status`` and ``message`` saying what happened (False).
+    model : Model or None
+        A prebuilt model of ``mech`` (saves the CasADi build).
+    progress : bool
+        Draw a progress bar of the simulated time on stderr.
+    branch : "continue" or (joint, sign)
+        Which branch to take at a singular position: the branch of the motion (continuity
+        of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
+        or -1). Other branches are found where one loop is singular at a time; where
+        several are, a rule that needs a switch ends the run as a dead point. With a
+        rule, IDA's samples are searched for singular positions it integrated through
+        without stopping (the rule is applied at each one's instant).
+    compiled : bool
+        IDA: run each configuration segment in C (IDA, the residual, its Jacobian and the
+        event functions; built with the system C compiler on first use and cached). Same
+        events and numbers to round-off; pays on long runs and sweeps. Without a working
+        compiler (or with load laws given as Python callables) it warns once and runs the
+        Python path.
+    linsolver : {"auto", "dense", "sparse"}
+        IDA's linear solver: dense LU, or sparse LU (SuperLU_MT) on the Jacobian's
+        structural pattern; "auto" takes the sparse one for large mechanisms (2 nq + 2 m
+        >= 300 unknowns), where it wins. The compiled segment makes the same choice.
+
+    Returns
+    -------
+    Result
+
+    Raises
+    ------
+    TypeError
+        ``mech`` is not a Mechanism (a model file's path: read it with
+        :func:`cmm_dae.load`).
+    ModelError
+        A bad option (all of them named at once) or a bad initial state.
+    AssemblyError
+        The mechanism cannot be assembled at t = 0.
+    SolverError
+        The run failed part-way; ``.result`` holds everything computed up to then.
+    """
+    require_mechanism(mech, "simulate")
+    opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
+                         output_every=output_every, max_events=max_events, v_lock=v_lock,
+                         max_steps=max_steps)
+    rule = branch_rule(mech, branch)
+    bar = Bar(opts.t_end, f"{mech.name} ({method})", "s", enabled=progress)
+    if linsolver not in ("auto", "dense", "sparse"):
+        raise ModelError(f"linsolver must be 'auto', 'dense' or 'sparse', not {linsolver!r}")
+    opts = dataclasses.replace(opts, progress=bar, branch=rule, compiled=bool(compiled),
+                               linsolver=linsolver)
+    try:
+        with _one_blas_thread():
+            res = _run(mech, opts, METHODS[method], throw, model, _trace)
+        bar.update(float(res.t[-1]))
+        return res
+    finally:
+        bar.close()
+
+
+def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
+         model: Model | None, trace: list | None = None) -> Result:
+    """The run; ``trace`` (a list) receives the start state and one
+    :class:`~cmm_dae.hybrid.SegmentTrace` per segment (for :mod:`cmm_dae.sensitivity`)."""
+    wall0 = time.perf_counter()
+    mech, eq_values = solve_equilibrium(mech)
+    if any(not p.startswith("initial.") for p in eq_values):
+        model = None  # the solved parameters are compiled into the model: build it anew
+    try:
+        model = model if model is not None else Model(mech)
+        if not model.dropped and model.m > 0:
+            drop = redundant_base_rows(model)
+            if drop:  # a redundant constraint set: equations without the dependent rows
+                model = Model(mech, drop=drop)
+        build = time.perf_counter() - wall0
+        hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
+        q, v, events = start_state(model, hs)
+        model.kkt(q, v, 0.0, hs.p)  # the accelerations must be determined at the start
+    except CmmError:
+        raise
+    except np.linalg.LinAlgError as e:
+        point = [n for n, b in mech.bodies.items() if b.inertia == 0.0]
+        if point:
+            raise AssemblyError(
+                f"the accelerations at t = 0 are undetermined: the rotation of point mass "
+                f"{', '.join(repr(n) for n in point)} (inertia 0) is not fixed by its joints; "
+                "give it an inertia or a second joint that fixes its angle",
+                joints=[]) from e
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    except (ArithmeticError, ValueError, RuntimeError) as e:
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    stats = Stats(build_time=build, method=cls.method)
+    rec = Recorder()
+    rec.add(0.0, q, v, hs.current())
+    after = [0] * len(events)  # the sample right after each event
+    integ = cls(model, hs, opts, stats)
+    status, message, err = Status.SUCCESS, "success", None
+    t = 0.0
+    try:
+        # joints that start on a stop, moving into it: the impact comes before any step
+        seen: set = set()
+        while starting := [x for x in ev.start_triggers(hs, q, v) if x not in seen]:
+            seen.add(starting[0])  # a rejected trigger (a joint leaving) is not asked again
+            for tr in ev.handle(hs, starting[0], q, v, 0.0, integ.policy):
+                events.append(tr.event)
+                q, v = tr.q, tr.v
+                rec.add(0.0, q, v, tr.event.after)
+                after.append(len(rec) - 1)
+        if trace is not None:
+            trace.append((q.copy(), v.copy(), list(events)))
+        while True:
+            seg = None if trace is None else ev.SegmentTrace(
+                t, q.copy(), v.copy(), hs.p.copy(), dict(hs.locked), hs.zones, dict(hs.slip),
+                dict(hs.stick_at), len(rec))
+            n0, t_seg = len(rec), t
+            passed: list[tuple[float, int]] = []
+            end = integ.advance(t, q, v, rec)
+            stats.segments += 1
+            retry = None
+            stalled = len(rec) == n0
+            if opts.branch is not None and cls.method == "ida":
+                end = watch_segment(hs.model, hs.p, t, q, v, rec, n0, end)
+            elif cls.method == "ida":
+                passed = log_stepped_over(hs, t, q, v, opts, rec, n0, end, events, after)
+                if seg is not None:
+                    seg.passages = passed
+                if end.reason == "singular" and not end.triggers:
+                    # where IDA gave up close to the instant, a crossing from its last
+                    # state can start too near (the accelerations there are ruled by
+                    # round-off): if it fails or jumps, it is tried again from the last
+                    # sample well before
+                    retry = functools.partial(passage_cut, hs.model, hs.p, t, q, v, rec, n0,
+                                              end, last=True)
+            t, q, v = end.t, end.q, end.v
+            if seg is not None:
+                seg.n1, seg.t1, seg.reason = len(rec), t, end.reason
+                seg.relaxed = bool(getattr(integ, "relaxed", False))
+                seg.lambda_scale = float(getattr(integ, "lambda_scale", 1.0))
+                trace.append(seg)
+            for trig in end.triggers:
+                done = ev.handle(hs, trig, q, v, t, integ.policy)
+                if seg is not None:
+                    seg.groups.append((trig, done, [hs.params[x.event.after] for x in done]))
+                for tr in done:
+                    events.append(tr.event)
+                    q, v = tr.q, tr.v
+                    rec.add(t, q, v, tr.event.after)
+                    after.append(len(rec) - 1)
+                    if len(events) > opts.max_events:
+                        e = tr.event
+                        raise SolverError(f"max_events = {opts.max_events} reached at t = "
+                                          f"{t:.9g} s (last: {e.kind} of joint {e.joint})",
+                                          status=Status.MAX_EVENTS)
+                integ.after_events(done)
+            if end.reason == "singular":
+                n_events = len(events)
+                # a segment that recorded nothing restarts the last crossing, whose
+                # instant lies before it
+                cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry,
+                                          stalled, -math.inf if stalled else t_seg)
+                if len(events) > n_events:
+                    _drop_twin_passage(events, after, passed, cr)
+                t, q, v = cr.t_after, cr.q, cr.v
+                if seg is not None:
+                    seg.crossing, seg.crossing_logged = cr, len(events) > n_events
+                    if kept is not None:  # crossed from an earlier sample: the segment,
+                        seg.n1, seg.t1 = kept, cr.t0  # as the sensitivities replay it, ends there
+                if t >= opts.t_end * (1.0 - 1e-12):
+                    break
+                continue
+            if end.reason == "end":
+                break
+    except KeyboardInterrupt as e:
+        status, message, err = Status.INTERRUPTED, "interrupted (KeyboardInterrupt)", e
+    except SolverError as e:
+        status, message, err = e.status, str(e), e
+    except Exception as e:  # noqa: BLE001 - every failure inside a run keeps its partial Result
+        status, err = Status.NUMERICAL, e
+        message = (f"numerical failure after t = {rec.last_t:.9g} s (the last state kept): "
+                   f"{type(e).__name__}: {e}")
+    res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
+                       stats, status, message, np.array(after, int))
+    res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
+    # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
+    res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if cls.method == "ida"
+                              else None)
+    # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
+    # falls back to the Python path where it cannot be built)
+    res.meta["linsolver"] = (("sparse" if integ.sparse else "dense")
+                             if hasattr(integ, "sparse") else None)
+    res.meta["compiled"] = getattr(integ, "c", None) is not None
+    stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
+    if err is not None and throw:
+        raise SolverError(message, status=status, result=res,
+                          configuration=hs.configurations[hs.current()],
+                          last_event=events[-1] if events else None) from err
+    return res
+
+
+def _drop_twin_passage(events: list, after: list[int], passed: list[tuple[float, int]],
+                       cr) -> None:
+    """A singular position IDA integrated through (found in its samples) and then, IDA
+    failing right after it, crossed from its last state: one instant, logged once, by the
+    crossing (A02 at rtol 1e-8 with IDA's own steps logged 1.2152617825 s twice, 2e-11 s
+    apart). The passage's event, its sample index and its entry in ``passed`` go."""
+    # the same instant to well within what either finds it to (the passage on the
+    # samples' interpolant, the crossing along its Gauss steps); two singular positions a
+    # microsecond apart are one event to any integrator
+    if not passed or abs(passed[-1][0] - cr.t_singular) > TWIN_INSTANT * max(1.0, cr.t_after):
+        return
+    t_p = passed.pop()[0]
+    i = next(i for i in range(len(events) - 2, -1, -1)
+             if events[i].kind == "singular" and events[i].t == t_p)
+    del events[i], after[i]
+
+
+def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8,
+            atol: float | None = None,
+            output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
+            max_steps: int | None = None, throw: bool = True,
+            model: Model | None = None, progress: bool = False,
+            branch: str | tuple[str, int] = "continue", compiled: bool = False,
+            linsolver: str = "auto") -> Result:
+    """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
+    require_mechanism(mech, "run_dae")
+    return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
+                    max_events=max_events, v_lock=v_lock, max_steps=max_steps, throw=throw,
+                    model=model, progress=progress, branch=branch, compiled=compiled,
+                    linsolver=linsolver)
+
+
+def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
+                  output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
+                  max_steps: int | None = None, throw: bool = True,
+                  model: Model | None = None, progress: bool = False,
+                  branch: str | tuple[str, int] = "continue") -> Result:
+    """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
+    ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
+    require_mechanism(mech, "run_iterative")
+    return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
+                    v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
+                    model=model, progress=progress, branch=branch)
+
+
+__all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate"]

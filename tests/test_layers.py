@@ -1,0 +1,121 @@
+"""The layer contract of the package: each sub-package imports only the layers below it,
+at module level (no import inside a function to dodge a cycle), and there is no import
+cycle among the modules. Read from the files themselves with ast, so it fails the moment a
+reversed import is written (shown once: ``from ..simulation.runner import simulate`` in
+``hybrid/start.py`` fails ``test_every_import_goes_down``)."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+# found without importing it: the contract holds (and fails readably) even where a
+# reversed import makes the package itself fail to import
+PKG = Path(importlib.util.find_spec("cmm_dae").origin).resolve().parent
+
+#: The layers, bottom first; a module may import its own layer and those before it.
+LAYERS = ["core", "description", "equations", "hybrid", "singular", "integrators", "results",
+          "simulation", "sensitivity", "studies", "report"]
+#: Modules above every layer.
+TOP = {"__init__", "cli"}
+
+
+def _modules():
+    for f in sorted(PKG.rglob("*.py")):
+        rel = f.relative_to(PKG).with_suffix("")
+        yield f, rel.parts
+
+
+def _imports(f: Path, parts: tuple[str, ...]):
+    """(target top-level part of cmm_dae, line, inside a function) of every relative or
+    absolute import of cmm_dae in the file."""
+    tree = ast.parse(f.read_text())
+    funcs = [n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)]
+    inside = {id(x) for fn in funcs for x in ast.walk(fn)}
+    typing_only = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            typing_only |= {id(x) for x in ast.walk(node)}
+    pkg_parts = parts[:-1]
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.ImportFrom) or id(node) in typing_only:
+            continue
+        if node.level:
+            base = list(pkg_parts[:len(pkg_parts) - node.level + 1])
+            mod = (node.module or "").split(".") if node.module else []
+            full = base + [m for m in mod if m]
+            if not full:  # from . import x (the package root): x is the target
+                full = [node.names[0].name]
+        elif node.module and node.module.split(".")[0] == "cmm_dae":
+            full = node.module.split(".")[1:] or [node.names[0].name]
+        else:
+            continue
+        yield full[0], node.lineno, id(node) in inside
+
+
+def layer_of(top: str) -> int:
+    return len(LAYERS) if top in TOP else LAYERS.index(top)
+
+
+@pytest.mark.parametrize("f,parts", list(_modules()), ids=lambda x: str(x))
+def test_every_import_goes_down(f, parts):
+    here = parts[0]
+    if here in TOP:  # the package root and the command line may import any layer
+        return
+    mine = layer_of(here)
+    for target, line, _ in _imports(f, parts):
+        if target in TOP or target.startswith("_"):
+            assert here in TOP, f"{f}:{line} imports the top ({target})"
+            continue
+        assert target in LAYERS, f"{f}:{line} imports cmm_dae.{target}, not a layer"
+        assert layer_of(target) <= mine, (
+            f"{f.relative_to(PKG)}:{line}: layer '{here}' imports '{target}', a layer above it")
+
+
+def test_no_import_hidden_in_a_function_to_reach_up_or_across():
+    """Imports inside functions are allowed only downwards (lazy imports of heavy optional
+    libraries are not cmm_dae's); none may reach a layer above."""
+    bad = []
+    for f, parts in _modules():
+        mine = layer_of(parts[0])
+        for target, line, inside in _imports(f, parts):
+            if inside and target in LAYERS and layer_of(target) > mine:
+                bad.append(f"{f.relative_to(PKG)}:{line} -> {target}")
+    assert not bad
+
+
+def test_the_old_flat_paths_still_import_with_a_warning():
+    import importlib
+    import sys
+
+    sys.modules.pop("cmm_dae.events", None)
+    with pytest.warns(DeprecationWarning, match="cmm_dae.events is now cmm_dae.hybrid.policy"):
+        old = importlib.import_module("cmm_dae.events")
+    from cmm_dae.hybrid import policy
+
+    assert old is policy
+
+
+#: Modules still over 400 lines, to be split (docs/architecture.md); none may join them.
+LONG = {"equations/model.py", "integrators/ida.py", "cli.py", "description/mechanism.py",
+        "sensitivity/replay.py"}
+
+
+def test_no_new_module_over_400_lines():
+    over = {str(f.relative_to(PKG)) for f, _ in _modules()
+            if len(f.read_text().splitlines()) > 400}
+    assert over <= LONG, sorted(over - LONG)
+
+
+def test_api_reference_lists_exactly_what_the_package_exports():
+    import re
+
+    import cmm_dae
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "api.md").read_text()
+    top = re.findall(r"^::: cmm_dae\.(\w+)\s*$", doc, flags=re.M)
+    assert len(top) == len(set(top))
+    assert set(top) == set(cmm_dae.__all__)
