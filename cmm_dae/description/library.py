@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 from ..core.errors import CmmError
+from . import mechanism as cd
 from .mechanism import Mechanism
 
 _HERE = Path(__file__).resolve().parent.parent  # the package root
@@ -78,8 +79,6 @@ def four_bar_chain(n: int, *, driven: bool = False, swing: float = 0.3) -> Mecha
     size grows with ``n`` (3 (2n + 1) coordinates, 2 (3n + 1) constraint rows), for
     scaling studies (``validation/benchmark.py``).
     """
-    from . import mechanism as cd
-
     lengths = [0.8 if i % 2 == 0 else 1.0 for i in range(n + 1)]
     bodies, joints = [], []
     ground = {f"O{i}": (float(i), 0.0) for i in range(n + 1)}

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from . import rank
 from .model import Model
 from .unknowns import ground_pins
 
@@ -122,23 +123,14 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     """Smallest over largest singular value of the active constraint rows at q (0 when
     they are dependent): :func:`dependent_rows`' measure alone, without the singular
     vectors (several times cheaper on large constraint sets)."""
-    act = model.active_rows(p)
-    J = model.constraints(q, t, p).Phi_q[act]
-    if J.size == 0:
-        return 0.0
-    s = np.linalg.svd(J, compute_uv=False)
-    if J.shape[0] > J.shape[1]:
-        return 0.0
-    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
+    return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
 
 
 def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -> int:
     """How many singular values of the active rows' Jacobian have collapsed at q, the
     singular instant, against ``r0``, the ratio where the approach to it was seen: those
     below a tenth of ``r0`` times the largest (at least 1)."""
-    J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
-    s = np.linalg.svd(J, compute_uv=False)
-    return max(int(np.sum(s < 0.1 * r0 * s[0])), 1) if s.size else 1
+    return rank.collapsed(model.constraints(q, t, p).Phi_q[model.active_rows(p)], r0)
 
 
 def row_names(labels: list[str], limit: int = 12) -> str:

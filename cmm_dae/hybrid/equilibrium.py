@@ -20,11 +20,15 @@ acceleration (the earlier rule, which adds that coordinate's convective term) le
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import null_space
 from scipy.optimize import root
 
 from ..core.errors import AssemblyError, CmmError, ModelError, Problem
 from ..description.mechanism import Initial, Mechanism
+from ..description.params import param_value, with_params
+from ..equations import rank
+from ..equations.model import Model
+from .start import start_state
+from .state import HybridState
 
 #: Largest acceleration residual (rad/s^2 or m/s^2) accepted as equilibrium.
 EQ_TOL = 1e-9
@@ -34,16 +38,13 @@ def free_motion(mech: Mechanism) -> tuple[np.ndarray, np.ndarray]:
     """At the assembled start: the accelerations of a KKT solve (centroid coordinates)
     and an orthonormal basis of the free motion (the null space of the active constraint
     Jacobian, drivers' rows included), (nq, dof)."""
-    from ..equations.model import Model
-    from .policy import HybridState
-    from .start import start_state
 
     model = Model(mech)
     hs = HybridState(model)
     q, v, _ = start_state(model, hs)
     a, _, _ = model.kkt(q, v, 0.0, hs.p)
     J = model.constraints(q, 0.0, hs.p).Phi_q[model.active_rows(hs.p)]
-    return a, null_space(J, rcond=1e-10) if J.size else np.eye(model.nq)
+    return a, rank.null_space(J, model.nq)
 
 
 def static_residual(mech: Mechanism, basis: np.ndarray) -> np.ndarray:
@@ -64,7 +65,6 @@ def solve_equilibrium(mech: Mechanism) -> tuple[Mechanism, dict[str, float]]:
     ModelError
         A path that is not a parameter, or no equilibrium found (the residual named).
     """
-    from ..description.params import param_value, with_params
 
     eq = mech.initial.equilibrium
     if not eq:

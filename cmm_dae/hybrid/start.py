@@ -13,6 +13,7 @@ from scipy.optimize import least_squares
 
 from ..core.errors import AssemblyError, ModelError, Problem
 from ..core.records import Event
+from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
 from .policy import resting_rate, stick_or_slip
@@ -21,8 +22,6 @@ from .zones import initial_zones
 
 #: Position residual (m or rad) below which a loop counts as closed.
 CLOSE_TOL = 1e-10
-#: Ratio of smallest to largest singular value below which constraints count as singular.
-SINGULAR_TOL = 1e-9
 
 
 def initial_guess(model: Model) -> np.ndarray:
@@ -100,10 +99,9 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
     r, J = fun(q)
     res = float(np.max(np.abs(r), initial=0.0))
     if n_eq > model.nq:  # redundant rows, or too many coordinates named: count by rank
-        sv = np.linalg.svd(model.kinematics(q, t, p)[0].Phi_q[act], compute_uv=False)
-        rank = int(np.sum(sv > SINGULAR_TOL * sv[0])) if sv.size and sv[0] > 0 else 0
-        if len(names) != model.nq - rank:
-            raise wrong_count(model.nq - rank)
+        r = rank.rank(model.kinematics(q, t, p)[0].Phi_q[act])
+        if len(names) != model.nq - r:
+            raise wrong_count(model.nq - r)
     if res > CLOSE_TOL:
         worst = np.argsort(-np.abs(r))[:4]
         labels = sorted(set(_labels(model, act[worst[worst < len(act)]], names)))
@@ -120,7 +118,7 @@ def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, f
 def check_rank(model: Model, J: np.ndarray, act, names: list[str], t: float) -> None:
     """Raise AssemblyError naming the rows of a singular (redundant) square system."""
     U, s, _ = np.linalg.svd(J)
-    if s.size and s[-1] < SINGULAR_TOL * s[0]:
+    if s.size and s[-1] < rank.RANK_TOL * s[0]:
         w = U[:, s.size - 1]
         rows = np.flatnonzero(np.abs(w) > 0.05 * np.max(np.abs(w)))
         idx = list(act) + list(range(len(model.rows), len(model.rows) + len(names)))

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Configuration, Event
+from ..equations import rank
 from ..equations.model import Model
 
 #: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
@@ -215,10 +216,7 @@ class HybridState:
 def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -> bool:
     """True when the active constraint rows of lock set ``locked`` are dependent at q."""
     p = hs.params_of(locked)
-    J = hs.model.constraints(q, t, p).Phi_q[hs.model.active_rows(p)]
-    s = np.linalg.svd(J, compute_uv=False)
-    rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
-    return rank < J.shape[0]
+    return rank.dependent(hs.model.constraints(q, t, p).Phi_q[hs.model.active_rows(p)])
 
 
 def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,

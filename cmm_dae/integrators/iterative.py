@@ -23,6 +23,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Stats
+from ..equations import rank
 from ..equations.codegen import Buffered
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -35,9 +36,7 @@ def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
     the free motion best (column-pivoted QR on their rates over the null space of the
     active constraints), the user's [initial] choice first when it is well conditioned."""
     J = model.constraints(q, t, hs.p).Phi_q[model.active_rows(hs.p)]
-    _, s, Vt = np.linalg.svd(J)
-    rank = int(np.sum(s > 1e-10 * s[0])) if s.size else 0
-    N = Vt[rank:].T  # null space: the free motions
+    N = rank.null_space(J, model.nq)  # the free motions
     dof = N.shape[1]
     if dof == 0:
         return []

@@ -16,6 +16,8 @@ import numpy as np
 
 from ..core.errors import CmmError, ModelError, Problem
 from ..results.result import Result
+from . import plots
+from .animation import html_animation
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..studies.precision import WorkPrecision
@@ -142,7 +144,6 @@ class Comparison:
         Path
             ``report.md``.
         """
-        from . import plots
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -187,7 +188,6 @@ class Comparison:
         (out / "report.md").write_text("\n".join(md))
         page = _markdown_to_html(md, name)
         if animation:
-            from .animation import html_animation
 
             player = html_animation(self.a, max_frames=frames)
             page = page.replace("\n</body>", f"\n<h2>Animation ({html.escape(la)})</h2>\n"

@@ -15,6 +15,7 @@ import numpy as np
 from ..core.errors import STATUS_MESSAGES, CmmError, Status
 from ..core.records import Configuration, Event, Stats
 from .audit import Energy, energy_audit
+from .export import columns, save, to_csv, to_dataframe
 
 
 @dataclass(frozen=True)
@@ -244,26 +245,22 @@ class Result:
     def columns(self) -> dict[str, np.ndarray]:
         """Every series as named columns (SI units in the names); see
         :mod:`cmm_dae.results.export`."""
-        from .export import columns
 
         return columns(self)
 
     def to_csv(self, path: str | Path) -> Path:
         """Write every series to a CSV file (one row per sample, a header naming each column
         with its unit, the configuration by its description)."""
-        from .export import to_csv
 
         return to_csv(self, path)
 
     def to_dataframe(self) -> Any:
         """Every series as a :class:`pandas.DataFrame` (needs pandas: ``pip install
         'cmm_dae[dataframe]'``), one row per sample, columns named with their units."""
-        from .export import to_dataframe
 
         return to_dataframe(self)
 
     def save(self, path: str | Path) -> Path:
         """Save the whole Result (arrays, configurations, events, stats) to an ``.npz`` file."""
-        from .export import save
 
         return save(self, path)

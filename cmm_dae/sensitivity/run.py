@@ -43,6 +43,7 @@ from ..equations.model import Model
 from ..hybrid.equilibrium import solve_equilibrium
 from ..hybrid.start import redundant_base_rows
 from ..results.result import Result
+from ..simulation.runner import simulate
 from .model import Equations
 from .replay import SensitivityPass
 
@@ -223,7 +224,6 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     SolverError
         The run or the sensitivity integration failed.
     """
-    from ..simulation.runner import simulate
 
     wall0 = time.perf_counter()
     require_mechanism(mech, "sensitivities")

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..core.errors import SolverError, Status
+from ..equations import rank
 from ..equations.kinematics import dependent_rows, rank_drop, row_names
 from ..equations.model import Model
 from .branches import choose_branch, other_branches
@@ -125,11 +126,7 @@ class Crossing:
 
 
 def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
-    J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
-    s = np.linalg.svd(J, compute_uv=False)
-    if J.shape[0] > J.shape[1]:
-        return 0.0
-    return float(s[-1] / s[0]) if s.size and s[0] > 0 else 1.0
+    return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
 
 
 def _ratio_rate(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,

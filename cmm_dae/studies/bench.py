@@ -13,6 +13,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
+from ..description.library import four_bar_chain
 from ..description.loader import load
 from ..equations.model import Model
 from ..integrators import csegment
@@ -82,7 +83,6 @@ def chain_growth(sizes: tuple[int, ...] = (8, 16, 32), *, t_end: float = 1.0,
     (:func:`cmm_dae.description.library.four_bar_chain`, one DOF, no singular position) for each n,
     default options, and the growth exponent from the first size to the last (the slope
     of log wall time over log n)."""
-    from ..description.library import four_bar_chain
 
     rows = []
     for n in sizes:

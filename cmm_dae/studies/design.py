@@ -21,6 +21,7 @@ from scipy.optimize import minimize
 from ..core.errors import CmmError, ModelError, Problem
 from ..description.mechanism import Mechanism
 from ..description.params import param_value, with_params
+from ..description.writer import write_model
 from ..results.result import Result
 from ..sensitivity.run import Sensitivities, check_params, sensitivities
 from .targets import Target, parse_target
@@ -110,7 +111,6 @@ class Design:
         """Write the optimised mechanism as a model file (the original file's tables with
         the optimised values; comments are not kept). Refuses to overwrite an existing
         file unless ``overwrite``."""
-        from ..description.writer import write_model
 
         return write_model(self.mechanism, path, dict(zip(self.params, self.optimum,
                                                           strict=True)),

@@ -6,6 +6,8 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import ModelError, Problem
+from ..description.library import model_path
+from ..description.loader import load
 from .design import Design, design
 
 __all__ = ["design_spec"]
@@ -41,8 +43,6 @@ def design_spec(path: str | Path) -> dict[str, Any]:
     """
     import tomllib
 
-    from ..description.library import model_path
-    from ..description.loader import load
 
     path = Path(path)
     src = str(path)

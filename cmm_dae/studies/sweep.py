@@ -26,6 +26,7 @@ from ..core.progress import Bar
 from ..description.mechanism import Mechanism
 from ..description.params import with_params
 from ..results.result import Result
+from ..simulation.runner import simulate
 
 Metric = Callable[[Result], Mapping[str, float]]
 #: Most cases in one sweep (a grid's size is the product of its value counts).
@@ -67,7 +68,6 @@ def default_metrics(res: Result) -> dict[str, float]:
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
              metrics: Metric | None, run_options: dict[str, Any]) -> dict[str, Any]:
     """One sweep row; never raises for a failing variant (status and message say why)."""
-    from ..simulation.runner import simulate
 
     row: dict[str, Any] = dict(values)
     t0 = time.perf_counter()

@@ -1,0 +1,66 @@
+"""The rank of the active constraint rows, in one place: their singular-value ratio, their
+numerical rank, whether they are dependent, the free motion they leave (null space) and how
+many singular values collapsed at a singular instant. One threshold each, named here.
+
+Every decision of the package that depends on the constraints' rank goes through these:
+the lock-up and jam tests of the event policy, the counts of the assembly, the free
+coordinates of the fixed-step algorithm, the equilibrium start's free motion, the
+singular-position logic of both integrators."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import null_space as _null_space
+
+__all__ = ["COLLAPSE", "RANK_TOL", "collapsed", "dependent", "null_space", "rank", "ratio"]
+
+#: Relative size (to the largest) below which a singular value counts as zero: the
+#: numerical rank, dependent rows, the null space. Rows this close to dependent cannot be
+#: told from dependent ones in double precision after the products that built them.
+RANK_TOL = 1e-9
+#: A singular value has collapsed at a singular instant when it is below this fraction of
+#: the ratio seen on the approach to it (times the largest).
+COLLAPSE = 0.1
+
+
+def singular_values(J: np.ndarray) -> np.ndarray:
+    """Singular values of ``J``, largest first (none for an empty matrix)."""
+    return np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
+
+
+def ratio(J: np.ndarray) -> float:
+    """Smallest over largest singular value of the rows ``J`` (n_rows, n_coords): 1 for no
+    rows (nothing can be dependent), 0 for more rows than coordinates (they must be) or a
+    zero matrix."""
+    if J.shape[0] == 0:
+        return 1.0
+    if J.shape[0] > J.shape[1]:
+        return 0.0
+    s = singular_values(J)
+    return float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
+
+
+def rank(J: np.ndarray, tol: float = RANK_TOL) -> int:
+    """Numerical rank of ``J``: singular values above ``tol`` times the largest."""
+    s = singular_values(J)
+    return int(np.sum(s > tol * s[0])) if s.size and s[0] > 0 else 0
+
+
+def dependent(J: np.ndarray) -> bool:
+    """True when the rows of ``J`` are (numerically) dependent."""
+    return rank(J) < J.shape[0]
+
+
+def null_space(J: np.ndarray, n_coords: int | None = None) -> np.ndarray:
+    """Orthonormal basis of the motions the rows ``J`` leave free, (n_coords, dof)."""
+    if J.shape[0] == 0:
+        return np.eye(J.shape[1] if n_coords is None else n_coords)
+    return _null_space(J, rcond=RANK_TOL)
+
+
+def collapsed(J: np.ndarray, r0: float) -> int:
+    """How many singular values of ``J`` have collapsed (below :data:`COLLAPSE` times
+    ``r0``, the ratio where the approach to a singular instant was seen, times the
+    largest); at least 1."""
+    s = singular_values(J)
+    return max(int(np.sum(s < COLLAPSE * r0 * s[0])), 1) if s.size else 1
