@@ -174,3 +174,14 @@ def short_coupler_four_bar(tmp_path, ground: float):
     return cd.load(path)
 
 
+
+
+#: Options of each integration method (simulate refuses the other method's by name).
+_IDA_KEYS = {"rtol", "atol", "output_dt", "linsolver", "compiled"}
+_ITERATIVE_KEYS = {"dt", "output_every"}
+
+
+def for_method(method: str, **options) -> dict:
+    """The run options that apply to ``method``, from a set written for both."""
+    drop = _ITERATIVE_KEYS if method == "ida" else _IDA_KEYS
+    return {k: v for k, v in options.items() if k not in drop}

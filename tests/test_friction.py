@@ -10,6 +10,8 @@ from scipy.optimize import brentq
 
 import cmm_dae as cd
 
+from refs import for_method
+
 MASS, AMP, HZ, FS, FK = 1.0, 2.0, 0.5, 1.0, 0.6
 W = 2 * math.pi * HZ
 
@@ -61,7 +63,8 @@ def test_stick_slip_block_against_closed_form(method):
     ref = closed_form(4.0)
     assert len(ref) >= 5
     dt = 1e-3
-    res = cd.simulate(block(), 4.0, method=method, rtol=1e-11, atol=1e-13, dt=dt)
+    res = cd.simulate(block(), 4.0, method=method,
+                      **for_method(method, rtol=1e-11, atol=1e-13, dt=dt))
     got = [(e.kind, e.t) for e in res.events]
     assert [k for k, _ in got] == [k for k, _ in ref]
     err = np.abs(np.array([t for _, t in got]) - np.array([t for _, t in ref]))

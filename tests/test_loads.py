@@ -13,6 +13,8 @@ from scipy.integrate import solve_ivp
 
 import cmm_dae as cd
 
+from refs import for_method
+
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
 #: Test Set for IVP Solvers (CWI / Bari), problem "andrews": y(0.03), computed with PSIDE at
@@ -270,8 +272,8 @@ def hand(t: float, c: float, rate: float) -> float:
 
 @pytest.mark.parametrize("method", ["ida", "iterative"])
 def test_callable_law_against_minimal_coordinates(method):
-    res = cd.simulate(callable_rod(hand), 2.0, method=method, rtol=1e-11, atol=1e-13,
-                      dt=1e-4, output_every=100)
+    res = cd.simulate(callable_rod(hand), 2.0, method=method,
+                      **for_method(method, rtol=1e-11, atol=1e-13, dt=1e-4, output_every=100))
     jo = JC + M * RC**2
 
     def rhs(t, y):

@@ -15,6 +15,8 @@ import cmm_dae as cd
 import cmm_dae.hybrid.policy as ev
 from cmm_dae.hybrid.start import assemble_positions, assemble_velocities, initial_guess
 
+from refs import for_method
+
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
 
@@ -141,7 +143,8 @@ def test_jam_frees_the_preloaded_joint_at_the_same_instant(method):
     t_hit = brentq(lambda t: slider_x(t) - 0.245, 0.8, 0.92, xtol=1e-15)
     h = 1e-7
     v_hit = (slider_x(t_hit + h) - slider_x(t_hit - h)) / (2 * h)
-    res = cd.simulate(mech, 1.0, method=method, rtol=1e-11, atol=1e-13, dt=1e-3)
+    res = cd.simulate(mech, 1.0, method=method,
+                      **for_method(method, rtol=1e-11, atol=1e-13, dt=1e-3))
     got = [(e.kind, e.joint, e.side) for e in res.events[:3]]
     assert got == [("lock", "D", "upper"), ("release", "D", "upper"), ("limit", "E", "upper")]
     rel, hit = res.events[1], res.events[2]

@@ -65,7 +65,8 @@ def test_sparse_linear_solver_matches_dense():
 
 
 def test_bad_linsolver_is_a_model_error():
-    with pytest.raises(ModelError, match="linsolver must be"):
+    with pytest.raises(ModelError, match=r"\[run\] linsolver: expected 'auto', 'dense' or "
+                       r"'sparse', got 'superlu'"):
         cd.run_dae(cd.load(cd.example("pendulum_stop")), 0.1, linsolver="superlu")
 
 

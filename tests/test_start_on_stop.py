@@ -17,6 +17,8 @@ from hypothesis import strategies as st
 
 import cmm_dae as cd
 
+from refs import for_method
+
 
 def pendulum(L: float, th0: float, w0: float, e: float = 0.0, torque: float = 0.0):
     with open(cd.example("pendulum_stop"), "rb") as f:
@@ -43,7 +45,8 @@ def test_start_on_stop_moving_in_is_an_impact_at_t0(method):
 
 @pytest.mark.parametrize("method", ["ida", "iterative"])
 def test_start_on_stop_moving_in_bounces_back(method):
-    res = cd.simulate(pendulum(-0.6, -0.6, -2.0, e=0.5), 0.05, method=method, dt=1e-4)
+    res = cd.simulate(pendulum(-0.6, -0.6, -2.0, e=0.5), 0.05, method=method,
+                      **for_method(method, dt=1e-4))
     first = res.events[0]
     assert (first.kind, first.t) == ("bounce", 0.0)
     assert first.velocity_after == pytest.approx(1.0, rel=1e-12)  # -e times -2 rad/s
@@ -84,6 +87,6 @@ def test_never_beyond_a_stop(L, where, w0, e, torque, method):
             pendulum(L, th0, w0, e, torque)
         return
     mech = pendulum(L, th0, w0, e, torque)
-    res = cd.simulate(mech, 0.5, method=method, dt=1e-3, throw=False)
+    res = cd.simulate(mech, 0.5, method=method, throw=False, **for_method(method, dt=1e-3))
     assert res.status in (cd.Status.SUCCESS, cd.Status.MAX_EVENTS), res.message
     assert np.min(off_events(res)) >= L - 1e-9 * max(1.0, abs(L))

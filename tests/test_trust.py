@@ -13,6 +13,8 @@ import pytest
 import cmm_dae as cd
 from cmm_dae.description import iftomm
 
+from refs import for_method
+
 
 @pytest.mark.parametrize("path,value,key", [
     ("joints.O.limits.lower", math.nan, "limits.lower"),   # was silently dropped
@@ -158,7 +160,8 @@ def test_friction_on_a_driven_slide_reverses_at_dead_centres(tmp_path, method):
     text = cd.example("slider_crank").read_text().replace(
         'axis = [1.0, 0.0]', 'axis = [1.0, 0.0]\nfriction = { static = 0.5, kinetic = 0.3 }')
     (tmp_path / "press.toml").write_text(text)
-    res = cd.simulate(cd.load(tmp_path / "press.toml"), 2.0, method=method, dt=1e-4)
+    res = cd.simulate(cd.load(tmp_path / "press.toml"), 2.0, method=method,
+                      **for_method(method, dt=1e-4))
     assert res.status == cd.Status.SUCCESS
     slips = [e for e in res.events if e.kind == "slip"]
     t_ref = (math.pi - 0.5) / (2 * math.pi) + 0.5 * np.arange(4)
@@ -252,3 +255,23 @@ def test_cli_refuses_bad_options_with_one_line(tmp_path, args, text):
     r = _cli(*args, cwd=tmp_path)
     assert r.returncode == 2 and text in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "s").exists()
+
+
+def test_run_options_of_the_other_method_and_a_foreign_model_are_refused_by_name():
+    mech = cd.load(cd.example("pendulum_stop"))
+    with pytest.raises(cd.ModelError) as info:
+        cd.simulate(mech, 0.1, method="iterative", rtol=1e-10, linsolver="dense")
+    assert {(p.table, p.key) for p in info.value.problems} == {("run", "rtol"),
+                                                               ("run", "linsolver")}
+    assert "applies to method=\"ida\" only" in info.value.problems[0].message
+    with pytest.raises(cd.ModelError) as info:
+        cd.simulate(mech, 0.1, dt=1e-3)
+    assert [(p.key, "method=\"iterative\" only" in p.message)
+            for p in info.value.problems] == [("dt", True)]
+    with pytest.raises(cd.ModelError) as info:
+        cd.simulate(mech, 0.1, linsolver="superlu")
+    assert [(p.table, p.key) for p in info.value.problems] == [("run", "linsolver")]
+    other = cd.Model(cd.load(cd.example("four_bar")))
+    with pytest.raises(cd.ModelError, match=r"\[run\] model: a model of another mechanism "
+                       r"\('four-bar'\)"):
+        cd.run_dae(mech, 0.1, model=other)

@@ -26,9 +26,30 @@ def _is_num(x: Any) -> bool:
 
 def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: Any,
                   output_dt: Any, dt: Any, output_every: Any, max_events: Any, v_lock: Any,
-                  max_steps: Any) -> RunOptions:
-    """Every run option checked up front; one :class:`ModelError` lists all problems."""
+                  max_steps: Any, linsolver: Any = "auto", compiled: Any = False,
+                  model: Any = None) -> RunOptions:
+    """Every run option checked up front; one :class:`ModelError` lists all problems,
+    under ``[run]``: bad values, options of the other method given another value than
+    their default (they would be ignored), a prebuilt ``model`` of another mechanism."""
     bad: list[Problem] = []
+    if method in METHOD_NAMES:
+        given = {"rtol": rtol != 1e-8, "atol": atol is not None,
+                 "output_dt": output_dt != 0.01, "linsolver": linsolver != "auto",
+                 "compiled": compiled is not False} if method == "iterative" else \
+            {"dt": dt != 0.01, "output_every": output_every != 1}
+        other = "ida" if method == "iterative" else "iterative"
+        bad += [Problem("run", k, f"applies to method=\"{other}\" only; this run is "
+                        f"method=\"{method}\"") for k, on in given.items() if on]
+    if linsolver not in ("auto", "dense", "sparse"):
+        bad.append(Problem("run", "linsolver", f"expected 'auto', 'dense' or 'sparse', "
+                           f"got {linsolver!r}"))
+    if not isinstance(compiled, bool):
+        bad.append(Problem("run", "compiled", f"expected True or False, got {compiled!r}"))
+    if model is not None and getattr(model, "mech", None) != mech:
+        name = getattr(getattr(model, "mech", None), "name", type(model).__name__)
+        bad.append(Problem("run", "model", f"a model of another mechanism ({name!r}), not "
+                           f"of {mech.name!r}: build it with cmm_dae.Model(mech) of this "
+                           "one"))
 
     def need(ok: bool, key: str, msg: str, value: Any) -> bool:
         if not ok:

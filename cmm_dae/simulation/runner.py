@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from ..core.errors import AssemblyError, CmmError, ModelError, SolverError, Status
+from ..core.errors import AssemblyError, CmmError, SolverError, Status
 from ..core.progress import Bar
 from ..core.records import Stats
 from ..description.mechanism import Mechanism, require_mechanism
@@ -129,7 +129,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         ``mech`` is not a Mechanism (a model file's path: read it with
         :func:`cmm_dae.load`).
     ModelError
-        A bad option (all of them named at once) or a bad initial state.
+        A bad option (all of them named at once, under ``[run]``): a bad value, an option
+        of the other method given a value other than its default (it would be ignored),
+        a ``model`` built from another mechanism; or a bad initial state.
     AssemblyError
         The mechanism cannot be assembled at t = 0.
     SolverError
@@ -138,11 +140,10 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     require_mechanism(mech, "simulate")
     opts = check_options(mech, method, t_end, rtol=rtol, atol=atol, output_dt=output_dt, dt=dt,
                          output_every=output_every, max_events=max_events, v_lock=v_lock,
-                         max_steps=max_steps)
+                         max_steps=max_steps, linsolver=linsolver, compiled=compiled,
+                         model=model)
     rule = branch_rule(mech, branch)
     bar = Bar(opts.t_end, f"{mech.name} ({method})", "s", enabled=progress)
-    if linsolver not in ("auto", "dense", "sparse"):
-        raise ModelError(f"linsolver must be 'auto', 'dense' or 'sparse', not {linsolver!r}")
     opts = dataclasses.replace(opts, progress=bar, branch=rule, compiled=bool(compiled),
                                linsolver=linsolver)
     try:
