@@ -377,6 +377,10 @@ class Model:
             load_val, load_pow = ex[3 * ne:3 * ne + nld], ex[3 * ne + nld:]
         dn = ca.densify
         self.phi_fn = ca.Function("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)])
+        #: Phi_q's nonzeros only, in CSC order of :attr:`phi_q_pattern` (large mechanisms'
+        #: screens: a chain of 32 loops has 2 % of its 194 x 291 entries nonzero)
+        self.phi_q_nz_fn = ca.Function("phi_q_nz", [q, t, p],
+                                       [ca.vertcat(*Phi_q.nonzeros())])
         self.coord_fn = ca.Function("coord", [q, v], [dn(c), dn(cdot), dn(c_q)])
         self._rates_jac = Buffered(ca.Function("rates_jac", [q, v], [dn(c), dn(cdot), dn(c_q),
                                                                      dn(ca.jacobian(cdot, q))]))

@@ -46,8 +46,27 @@ def _labels(model: Model, rows, known: list[str]) -> list[str]:
     return out
 
 
+def _once(model: Model, key: tuple, compute):
+    """``compute()`` once per model and key: the start's assembly, rank checks and
+    redundant rows depend on the model, the parameters and the given values alone, and a
+    sweep or a study runs one model many times (a 0.01-s run of a chain of 32 loops spent
+    half its time assembling the same start again)."""
+    cache = model.__dict__.setdefault("_start_cache", {})
+    if key not in cache:
+        cache[key] = compute()
+    return cache[key]
+
+
 def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, float],
                        q_guess: np.ndarray) -> np.ndarray:
+    """Solve the position equations plus ``c_j(q) = known[j]`` for q, once per model and
+    inputs (:func:`_solve_positions`); a fresh copy each call."""
+    key = ("q", float(t), p.tobytes(), tuple(known.items()), q_guess.tobytes())
+    return _once(model, key, lambda: _solve_positions(model, t, p, known, q_guess)).copy()
+
+
+def _solve_positions(model: Model, t: float, p: np.ndarray, known: dict[str, float],
+                     q_guess: np.ndarray) -> np.ndarray:
     """Solve the position equations plus ``c_j(q) = known[j]`` for q.
 
     Raises
@@ -143,7 +162,8 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     if J.shape[0] < J.shape[1]:
         raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
                                  f"joint rates, got {len(names)}"), model.mech.source)
-    check_rank(model, J, act, names, t)
+    _once(model, ("vrank", float(t), q.tobytes(), p.tobytes(), tuple(names)),
+          lambda: check_rank(model, J, act, names, t) or True)
     if J.shape[0] == J.shape[1]:
         return np.linalg.solve(J, rhs)
     v = np.linalg.lstsq(J, rhs, rcond=None)[0]  # redundant rows: consistent, least squares
@@ -222,4 +242,4 @@ def redundant_base_rows(model: Model, t0: float = 0.0) -> tuple[int, ...]:
     mech = model.mech
     known = {k: v for k, v in mech.initial.joints.items() if k not in mech.drivers}
     q = assemble_positions(model, t0, model.params(), known, initial_guess(model))
-    return redundant_rows(model, q, t0)
+    return _once(model, ("redundant", float(t0)), lambda: redundant_rows(model, q, t0))
