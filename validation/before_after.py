@@ -43,7 +43,10 @@ import json, sys, time, gc
 import numpy as np
 import cmm_dae as cd
 if sys.argv[1].startswith("a02:"):  # IFToMM A02 with N loops, from the builder
-    from cmm_dae.description import iftomm
+    import importlib, pathlib  # the layer folders (0.3 on), else the flat module
+    layers = (pathlib.Path(cd.__file__).parent / "description").is_dir()
+    iftomm = importlib.import_module("cmm_dae.description.iftomm" if layers
+                                     else "cmm_dae.iftomm")
     mech = iftomm.a02_four_bar(int(sys.argv[1][4:]))
 else:
     mech = cd.load(sys.argv[1])
