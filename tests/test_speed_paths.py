@@ -203,3 +203,28 @@ def test_clean_fallback_without_compiler(tmp_path):
     assert "no-such-compiler" in out[0] or "compiler" in out[0]
     assert out[1] == "False False"  # the Python path ran
     assert out[2] == "True True"
+
+
+def test_sparse_screen_matches_the_dense_one():
+    """The stepped-over screen of a large mechanism takes log det(J J^T) from Phi_q's
+    nonzeros (sparse LU per sample): the same numbers as the dense path (measured 7e-14 on
+    a chain of 32 loops), and the start's assembly is computed once per model."""
+    from cmm_dae.description.library import four_bar_chain
+    from cmm_dae.simulation import passage
+
+    mech = four_bar_chain(32)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 0.5, model=model)
+    assert model.kkt_sparse
+    p = model.params()
+    act = model.active_rows(p)
+    keep = np.r_[True, np.diff(res.t) > 0]
+    sparse = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
+    model.kkt_sparse = False
+    dense = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
+    model.kkt_sparse = True
+    assert np.max(np.abs(sparse - dense)) <= 1e-10
+    cached = len(model._start_cache)
+    again = cd.run_dae(mech, 0.5, model=model)
+    assert len(model._start_cache) == cached  # nothing assembled anew
+    assert np.array_equal(again.data["q"], res.data["q"])

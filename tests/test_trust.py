@@ -286,10 +286,99 @@ def test_own_steps_path_gives_scikit_sundaes_samples(monkeypatch):
 
     mech = cd.load(cd.example("double_folded"))
     ours = cd.run_dae(mech, 10.0, output_dt=None)
-    monkeypatch.setattr(ida, "_own_steps", lambda solver, tspan, y0, yp0:
+    monkeypatch.setattr(ida, "_own_steps", lambda solver, tspan, y0, yp0, *_:
                         solver.solve(tspan, y0, yp0))
     theirs = cd.run_dae(mech, 10.0, output_dt=None)
     assert ours.t.size == theirs.t.size > 1000
     assert np.array_equal(ours.t, theirs.t)
     assert np.array_equal(ours.data["q"], theirs.data["q"])
     assert [e.t for e in ours.events] == [e.t for e in theirs.events]
+
+
+@pytest.mark.parametrize("output_dt", [0.01, None])
+def test_ctrl_c_in_the_jacobian_keeps_the_samples(monkeypatch, output_dt):
+    """A Ctrl-C that lands in IDA's Jacobian callback (it was not caught there: the whole
+    segment was lost, a 16-loop chain interrupted after 3 s kept only t = 0) ends the run
+    as interrupted with every sample computed so far."""
+    from cmm_dae.integrators import ida
+
+    orig = ida.IdaIntegrator._jacobian
+    fired = []
+
+    def jac(self, t, *args):
+        if t > 0.5 and not fired:
+            fired.append(t)
+            raise KeyboardInterrupt
+        return orig(self, t, *args)
+
+    monkeypatch.setattr(ida.IdaIntegrator, "_jacobian", jac)
+    mech = cd.load(cd.example("slider_crank"))
+    res = cd.run_dae(mech, 5.0, throw=False, output_dt=output_dt)
+    assert fired and res.status == cd.Status.INTERRUPTED
+    assert 0.5 <= res.t[-1] < 5.0 and res.t.size > 10
+    ref = cd.run_dae(mech, res.t[-1], output_dt=output_dt)  # the same motion up to there
+    assert np.max(np.abs(res.driver("A").effort[-1] - ref.driver("A").effort[-1])) <= 1e-6
+
+
+def _crash_on_one_case(mech, values, t_end, metrics, run_options):
+    """A sweep case that kills its worker process for one parameter value."""
+    import os
+
+    from cmm_dae.studies import sweep as sw
+
+    if values["joints.O.limits.lower"] == -0.65:
+        os._exit(3)
+    return sw._real_run_case(mech, values, t_end, metrics, run_options)
+
+
+def test_a_dying_worker_costs_its_case_only(monkeypatch, tmp_path):
+    """A worker that dies took the whole sweep down (BrokenProcessPool), and again on every
+    resume: now its case gets an error row (in the checkpoint, not run again) and the
+    others their results."""
+    from cmm_dae.studies import sweep as sw
+
+    monkeypatch.setattr(sw, "_real_run_case", sw.run_case, raising=False)
+    monkeypatch.setattr(sw, "run_case", _crash_on_one_case)
+    mech = cd.load(cd.example("pendulum_stop"))
+    values = {"joints.O.limits.lower": [-0.7, -0.65, -0.6, -0.55]}
+    ck = tmp_path / "sweep.csv"
+    table = cd.sweep(mech, values, t_end=0.3, workers=2, checkpoint=ck)
+    rows = {r["joints.O.limits.lower"]: r for r in table.rows}
+    assert len(rows) == 4
+    assert rows[-0.65]["status"] == "error" and "died" in rows[-0.65]["message"]
+    assert all(rows[x]["status"] == "success" for x in (-0.7, -0.6, -0.55))
+    monkeypatch.setattr(sw, "run_case", lambda *a: pytest.fail("a case ran again"))
+    again = cd.sweep(mech, values, t_end=0.3, workers=2, checkpoint=ck)  # resumed
+    assert len(again.rows) == 4
+
+
+def test_ctrl_c_on_a_sweep_stops_at_once_and_keeps_the_finished_rows(monkeypatch, tmp_path):
+    """Ctrl-C ran every queued case before exiting and dropped their rows: now the queued
+    cases are cancelled, the workers stopped, and the rows finished so far are in the
+    checkpoint (a resume runs only the others)."""
+    from cmm_dae.studies import sweep as sw
+
+    calls = []
+    real_wait = sw.wait
+
+    def wait(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_wait(*a, **k)
+
+    monkeypatch.setattr(sw, "wait", wait)
+    mech = cd.load(cd.example("pendulum_stop"))
+    values = {"joints.O.limits.lower": list(np.linspace(-0.9, -0.5, 12))}
+    ck = tmp_path / "sweep.csv"
+    with pytest.raises(KeyboardInterrupt):
+        cd.sweep(mech, values, t_end=0.3, workers=2, checkpoint=ck)
+    done = len(ck.read_text().splitlines()) - 1  # rows under the header
+    assert 1 <= done < 12
+    monkeypatch.setattr(sw, "wait", real_wait)
+    ran = []
+    real_case = sw.run_case
+    monkeypatch.setattr(sw, "_run_pool", lambda todo, n, args, finish: [
+        (ran.append(i), finish(i, real_case(args[0], args[1][i], *args[2:]))) for i in todo])
+    table = cd.sweep(mech, values, t_end=0.3, workers=2, checkpoint=ck)
+    assert len(table.rows) == 12 and len(ran) == 12 - done

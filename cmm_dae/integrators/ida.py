@@ -107,21 +107,30 @@ def quiet_sundials():
         out.flush()
 
 
-def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray):
+def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
+               interrupted=lambda: None):
     """IDA's own steps from tspan[0] to tspan[-1], as ``solver.solve`` returns them for a
     two-point span, but kept in lists: scikit-sundae grows its output arrays by 500 rows
     at a time with a copy of all rows before, so its cost per step grew with the run
     (54 us per step over 100 s, 135 over 1000 s). The same IDA calls (one step at a time,
-    the end as stop time), so the same steps; a root, the stop time or a failure ends it."""
+    the end as stop time), so the same steps; a root, the stop time or a failure ends it.
+    A Ctrl-C between two steps ends it as a root would, ``interrupted()`` told, the steps
+    so far kept."""
     t_end = float(tspan[-1])
     first = solver.init_step(float(tspan[0]), y0, yp0)
     ts, ys = [first.t], [first.y]
-    while True:
-        x = solver.step(t_end, method="onestep", tstop=t_end)
-        ts.append(x.t)
-        ys.append(x.y)
-        if x.status != 0:
-            break
+    x = first
+    try:
+        while True:
+            x = solver.step(t_end, method="onestep", tstop=t_end)
+            ts.append(x.t)
+            ys.append(x.y)
+            if x.status != 0:
+                break
+    except KeyboardInterrupt:
+        interrupted()
+        return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
+                               i_events=np.zeros((1, 1), int), nfev=x.nfev, njev=x.njev)
     return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
                            message=x.message, i_events=x.i_events, nfev=x.nfev,
                            njev=x.njev)
@@ -417,13 +426,20 @@ class IdaIntegrator(Integrator):
                     self.error, self.t_error = e, self.t_last
                 res[:] = 0.0
 
+        def jacfn(t, y, yp, res, cj, JJ):
+            try:
+                self._jacobian(t, y, yp, res, cj, JJ)
+            except KeyboardInterrupt:  # as in the residual: IDA stops at the next root
+                self.interrupted = True  # check, with the samples so far
+                self._jacobian(t, y, yp, res, cj, JJ)
+
         eventsfn.direction = [0] + [-1] * len(self.triggers)
         eventsfn.terminal = [True] * ne
         with warnings.catch_warnings():  # "custom sparse Jacobian approximation will be
             # ignored in favor of the user-defined jacfn": as intended
             warnings.simplefilter("ignore", UserWarning)
             solver = None if self.c is not None else sun.ida.IDA(
-                resfn, jacfn=self._jacobian, eventsfn=eventsfn, num_events=ne,
+                resfn, jacfn=jacfn, eventsfn=eventsfn, num_events=ne,
                 # IDA's limit per call: what is left of the run's budget, which the root
                 # function counts across calls and ends cleanly ("stalled")
                 rtol=opts.rtol, atol=self.atol, max_num_steps=max(1, self.step_budget + 1),
@@ -449,12 +465,13 @@ class IdaIntegrator(Integrator):
                 r = self._solve_compiled(tspan, y0, yp0, first_step)
             else:
                 with quiet_sundials():
-                    r = (_own_steps(solver, tspan, y0, yp0) if opts.output_dt is None
-                         else solver.solve(tspan, y0, yp0))
+                    r = (_own_steps(solver, tspan, y0, yp0, self._interrupt)
+                         if opts.output_dt is None else solver.solve(tspan, y0, yp0))
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
-            raise SolverError(f"the integration failed at t = {self.t_last:.9g} s: {e}",
+            raise SolverError(f"the integration failed at t = {max(self.t_last, t0):.9g} s: "
+                              f"{e}",
                               status=Status.NUMERICAL) from e
         self.stats.steps += self.n_steps
         self.stats.nfev += int(r.nfev)
@@ -537,6 +554,10 @@ class IdaIntegrator(Integrator):
         if t_stop < opts.t_end:
             return SegmentEnd(t1, q1, v1, (), "restart")
         return SegmentEnd(t1, q1, v1, (), "end")
+
+    def _interrupt(self) -> None:
+        """Ctrl-C arrived outside IDA's callbacks: the segment ends with what it has."""
+        self.interrupted = True
 
     def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
         """Raise the absolute tolerances of positions and of velocities to the round-off

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.sparse import csc_matrix
+from scipy.sparse.linalg import splu
 
 from ..equations.kinematics import singular_ratio
 from ..equations.model import Model
@@ -55,6 +57,21 @@ class Passage:
     ratio: float  #: the interpolant's singular-value ratio there
 
 
+def _mapped_chunks(model: Model, name: str, p: np.ndarray, t: np.ndarray, q: np.ndarray):
+    """``model.<name>`` (of q, t, p) over the samples in chunks of :data:`CHUNK`, one mapped
+    evaluation each (the last chunk padded with its last sample, the padding dropped):
+    yields (first sample, samples in the chunk, the function's outputs)."""
+    fn = model.mapped(name, CHUNK)
+    P = np.repeat(p[:, None], CHUNK, axis=1)
+    for k in range(0, t.size, CHUNK):
+        m = min(CHUNK, t.size - k)
+        qk = np.empty((model.nq, CHUNK))
+        tk = np.empty(CHUNK)
+        qk[:, :m], tk[:m] = q[k:k + m].T, t[k:k + m]
+        qk[:, m:], tk[m:] = qk[:, m - 1:m], tk[m - 1]
+        yield k, m, fn(qk, tk, P)
+
+
 def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
               act: np.ndarray) -> np.ndarray:
     """log det(J J^T) of the active rows' Jacobian J at every sample (-inf where it is
@@ -63,17 +80,9 @@ def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     102 samples of A02 with 40 loops), evaluated in chunks of one mapped function."""
     if model.kkt_sparse:
         return _log_gram_sparse(model, p, t, q, act)
-    n = t.size
-    fn = model.mapped("phi_fn", CHUNK)
-    out = np.empty(n)
-    P = np.repeat(p[:, None], CHUNK, axis=1)
-    for k in range(0, n, CHUNK):
-        m = min(CHUNK, n - k)
-        qk = np.empty((model.nq, CHUNK))
-        tk = np.empty(CHUNK)
-        qk[:, :m], tk[:m] = q[k:k + m].T, t[k:k + m]
-        qk[:, m:], tk[m:] = qk[:, m - 1:m], tk[m - 1]  # padding, dropped
-        J = np.asarray(fn(qk, tk, P)[1]).reshape(model.m, CHUNK, model.nq)
+    out = np.empty(t.size)
+    for k, m, outs in _mapped_chunks(model, "phi_fn", p, t, q):
+        J = np.asarray(outs[1]).reshape(model.m, CHUNK, model.nq)
         J = J.transpose(1, 0, 2)[:m, act, :]
         sign, logdet = np.linalg.slogdet(J @ J.transpose(0, 2, 1))
         out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
@@ -85,28 +94,16 @@ def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     """:func:`_log_gram` of a large mechanism from Phi_q's nonzeros alone: J J^T as a sparse
     matrix per sample and log det from its sparse LU (a chain of 32 loops: the dense path
     copied 115 MB per chunk of samples and took a third of the run)."""
-    from scipy.sparse import csc_matrix
-    from scipy.sparse.linalg import splu
-
     pat = model.phi_q_pattern
     colind, row = (np.asarray(x, dtype=np.int64) for x in pat.get_ccs())
     shape = (pat.size1(), pat.size2())
-    n = t.size
-    fn = model.mapped("phi_q_nz_fn", CHUNK)
-    P = np.repeat(p[:, None], CHUNK, axis=1)
-    out = np.empty(n)
-    for k in range(0, n, CHUNK):
-        m = min(CHUNK, n - k)
-        qk = np.empty((model.nq, CHUNK))
-        tk = np.empty(CHUNK)
-        qk[:, :m], tk[:m] = q[k:k + m].T, t[k:k + m]
-        qk[:, m:], tk[m:] = qk[:, m - 1:m], tk[m - 1]  # padding, dropped
-        nz = np.asarray(fn(qk, tk, P)[0]).reshape(row.size, CHUNK).T  # (sample, nonzero)
+    out = np.empty(t.size)
+    for k, m, outs in _mapped_chunks(model, "phi_q_nz_fn", p, t, q):
+        nz = np.asarray(outs[0]).reshape(row.size, CHUNK).T  # (sample, nonzero)
         for j in range(m):
             J = csc_matrix((nz[j], row, colind), shape=shape)[act]
-            G = (J @ J.T).tocsc()
             try:
-                d = splu(G, permc_spec="MMD_AT_PLUS_A").U.diagonal()
+                d = splu((J @ J.T).tocsc(), permc_spec="MMD_AT_PLUS_A").U.diagonal()
             except RuntimeError:  # exactly singular
                 out[k + j] = -np.inf
                 continue

@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -286,15 +287,54 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
             for i in todo:
                 finish(i, run_case(mech, cases[i], t_end, metrics, run_options))
         else:
-            with ProcessPoolExecutor(max_workers=n) as pool:
-                pending = {pool.submit(run_case, mech, cases[i], t_end, metrics,
-                                       run_options): i for i in todo}
-                while pending:
-                    fin, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in fin:
-                        finish(pending.pop(fut), fut.result())
+            args = (mech, cases, t_end, metrics, run_options)
+            _run_pool(todo, n, args, finish)
     bar.close()
     return SweepTable([r for r in rows if r is not None])
+
+
+def _run_pool(todo: list[int], n: int, args: tuple, finish: Callable) -> None:
+    """The cases ``todo`` on a pool of ``n`` local processes, each row to ``finish`` as it
+    comes. A worker that dies (a crash, the kernel's out-of-memory killer) breaks the pool
+    and every case then running: those are run again one at a time in a pool of their
+    own, so the one that dies again gets a row saying so (status "error", kept in the
+    checkpoint, not run again on resume) and the others their results; the rest go on. A
+    Ctrl-C cancels the queued cases and stops the workers at once (the finished rows are
+    in the checkpoint already) and is raised again."""
+    mech, cases, t_end, metrics, run_options = args
+    queue = list(todo)
+    while queue:
+        pool = ProcessPoolExecutor(max_workers=n)
+        pending = {pool.submit(run_case, mech, cases[i], t_end, metrics, run_options): i
+                   for i in queue}
+        queue = []
+        broken: list[int] = []
+        try:
+            while pending:
+                fin, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in fin:
+                    i = pending.pop(fut)
+                    try:
+                        finish(i, fut.result())
+                    except BrokenProcessPool:
+                        broken.append(i)
+        except KeyboardInterrupt:
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in procs:  # the cases already running are not waited for either
+                proc.terminate()
+            raise
+        pool.shutdown(wait=True)
+        if not broken:
+            return
+        if len(broken) == 1 and n == 1:  # alone, and it died again: that case kills it
+            finish(broken[0], {**cases[broken[0]], "status": "error",
+                               "message": "the worker process running this case died "
+                                          "(a crash or out of memory)",
+                               "t_reached": math.nan})
+            continue
+        for i in broken:  # one at a time, to find the one that kills its worker
+            _run_pool([i], 1, args, finish)
 
 
 def parse_range(spec: str) -> tuple[str, list[float]]:
