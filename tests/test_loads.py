@@ -299,7 +299,8 @@ def test_callable_law_errors():
                        r"got str"):
         callable_rod("0.3 * sin(c)")  # never evaluated
     bad = callable_rod(lambda t, c, rate: math.nan if t > 0.5 else 0.0)
-    with pytest.raises(cd.SolverError, match=r"the law of load 'hand' returned nan") as info:
+    with pytest.raises(cd.SolverError, match=r"\[loads\.hand\] law: the Python callable "
+                       r"returned nan") as info:
         cd.run_dae(bad, 1.0)
     assert info.value.status is cd.Status.NUMERICAL and 0.4 < info.value.result.t[-1] <= 0.5
 

@@ -382,3 +382,28 @@ def test_ctrl_c_on_a_sweep_stops_at_once_and_keeps_the_finished_rows(monkeypatch
         (ran.append(i), finish(i, real_case(args[0], args[1][i], *args[2:]))) for i in todo])
     table = cd.sweep(mech, values, t_end=0.3, workers=2, checkpoint=ck)
     assert len(table.rows) == 12 and len(ran) == 12 - done
+
+
+@pytest.mark.parametrize("ret", [None, np.array([1.0, 2.0]), "x", math.nan])
+def test_callable_law_returning_no_number_names_the_load(ret):
+    mech = cd.load(cd.example("pendulum_stop"))
+    law = cd.Law(func=lambda t, c, r: ret)
+    mech = mech.replace(loads={"hand": cd.Load("hand", law, joint="O")})
+    with pytest.raises(cd.ModelError) as info:
+        cd.run_dae(mech, 0.1)
+    p = info.value.problems[0]
+    assert (p.table, p.key) == ("loads.hand", "law")
+    assert "expected one finite number" in p.message
+
+
+def test_a_dotted_name_is_refused():
+    import tomllib
+
+    with open(cd.example("pendulum_stop"), "rb") as f:
+        d = tomllib.load(f)
+    d["bodies"]["a.b"] = d["bodies"].pop("rod")
+    d["joints"]["O"]["connects"] = ["ground.O", "a.b.O"]
+    with pytest.raises(cd.ModelError) as info:
+        cd.from_dict(d)
+    assert any(p.table == "bodies.a.b" and "without '.'" in p.message
+               for p in info.value.problems)

@@ -94,6 +94,15 @@ def validate(m: Any) -> list[Problem]:
         out.append(Problem("mechanism", "gravity", f"expected two finite numbers, got {m.gravity}"))
     if not m.bodies:
         out.append(Problem("bodies", "", "a mechanism needs at least one body"))
+    for kind in ("bodies", "joints", "drivers", "loads", "elements"):
+        for name in getattr(m, kind):  # a dotted path (body.point, a parameter) splits at '.'
+            if not isinstance(name, str) or not name or "." in name:
+                out.append(Problem(f"{kind}.{name}", "", "a name must be a non-empty word "
+                                   "without '.' (references such as 'body.point' split there)"))
+    for name in m.ground:
+        if not isinstance(name, str) or not name or "." in name:
+            out.append(Problem("ground", f"points.{name}", "a point name must be a non-empty "
+                               "word without '.'"))
     for name, b in m.bodies.items():
         t = f"bodies.{name}"
         if name == GROUND:

@@ -21,6 +21,7 @@ This is the only module besides ``dae`` that imports CasADi.
 from __future__ import annotations
 
 import math
+import reprlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -30,6 +31,7 @@ import scipy.sparse as sps
 from scipy.linalg.lapack import dgesv
 from scipy.sparse.linalg import splu
 
+from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND, Mechanism
 from ..description.params import param_value, symbolic
 from .codegen import Buffered, compile_functions
@@ -540,10 +542,15 @@ class Model:
 
     def _call(self, name: str, t: float, c: float, cd: float) -> float:
         val = self.mech.loads[name].law.func(float(t), float(c), float(cd))
-        val = float(val)
-        if not math.isfinite(val):
-            raise ValueError(f"the law of load '{name}' returned {val} at t = {t:.9g} s")
-        return val
+        ok = isinstance(val, int | float | np.number) and not isinstance(val, bool | np.bool_) \
+            or (isinstance(val, np.ndarray) and val.shape == ())
+        if not ok or not math.isfinite(float(val)):
+            shown = reprlib.repr(val)
+            raise ModelError(Problem(f"loads.{name}", "law", f"the Python callable returned "
+                                     f"{shown} at t = {t:.9g} s (coordinate {c:.9g}, rate "
+                                     f"{cd:.9g}); expected one finite number, the load in N "
+                                     "or N m"), self.mech.source)
+        return float(val)
 
     def input_jacobian(self, t: float, q: np.ndarray, v: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
