@@ -19,6 +19,7 @@ from .core.errors import (
     SolverError,
     Status,
 )
+from .core.records import Configuration, Event, EventKind, Stats
 from .description.library import example, examples
 from .description.loader import from_dict, load
 from .description.mechanism import (
@@ -40,7 +41,7 @@ from .description.params import with_params
 from .description.structure import Group, Structure, labeller, structure
 from .equations.model import Model
 from .report.compare import Comparison, compare
-from .results.result import Configuration, Event, Result, Stats
+from .results.result import Result
 from .results.storage import load_result
 from .sensitivity.run import Sensitivities, sensitivities
 from .simulation.runner import METHODS, run_dae, run_iterative, simulate
@@ -51,7 +52,7 @@ from .studies.sweep import SweepTable, sweep
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
     "Configuration", "Convergence", "convergence", "Damper", "Design", "DesignError", "design",
-    "Driver", "Element", "Event",
+    "Driver", "Element", "Event", "EventKind",
     "example", "examples",
     "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",
     "Load",

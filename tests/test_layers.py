@@ -120,3 +120,14 @@ def test_api_reference_lists_exactly_what_the_package_exports():
     top = re.findall(r"^::: cmm_dae\.(\w+)\s*$", doc, flags=re.M)
     assert len(top) == len(set(top))
     assert set(top) == set(cmm_dae.__all__)
+
+
+def test_events_are_built_by_keyword_with_a_typed_kind():
+    import cmm_dae as cd
+
+    with pytest.raises(TypeError):
+        cd.Event(0.0, "lock", "E", "upper", 0, 1)  # positional: refused
+    res = cd.run_dae(cd.load(cd.example("double_folded")), 10.0)
+    assert [e.kind for e in res.events] == [cd.EventKind.LIMIT, cd.EventKind.RELEASE]
+    assert all(isinstance(e.kind, cd.EventKind) for e in res.events)
+    assert res.events[0].kind == "limit"  # equal to the plain string, as saved results are

@@ -5,8 +5,23 @@ read by the Result and the reports; they depend on nothing else in the package."
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
-__all__ = ["Configuration", "Event", "Stats"]
+__all__ = ["Configuration", "Event", "EventKind", "Stats"]
+
+
+class EventKind(StrEnum):
+    """What an :class:`Event` is (its ``kind``; equal to the plain string, so results and
+    files written before keep comparing equal)."""
+
+    LIMIT = "limit"  #: reached a limit and locked (an impact)
+    BOUNCE = "bounce"  #: reached a limit and rebounded
+    LOCK = "lock"  #: locked without an impact
+    RELEASE = "release"  #: a lock let go
+    STICK = "stick"  #: a joint with friction came to rest and holds
+    SLIP = "slip"  #: a joint with friction slips (or its friction reverses)
+    ZONE = "zone"  #: a load's zone entered or left
+    SINGULAR = "singular"  #: a singular position passed
 
 
 @dataclass(frozen=True)
@@ -47,7 +62,7 @@ class Configuration:
         return txt
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Event:
     """One configuration change (or bounce), in time order.
 

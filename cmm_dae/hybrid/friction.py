@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.records import Event
+from ..core.records import Event, EventKind
 from ..equations.kinematics import impact_map
 from .state import (
     HybridState,
@@ -32,8 +32,10 @@ def _begin_slip(hs: HybridState, t: float, joint: str, force: float, before: int
     s = _direction(force)
     hs.stick_at.pop(joint, None)
     hs.slip = {**hs.slip, joint: s}
-    return Event(t, "slip", joint, "positive" if s > 0 else "negative", before, hs.current(),
-                 rate, rate, {}, 0.0, float(force))
+    return Event(t=t, kind=EventKind.SLIP, joint=joint,
+                 side="positive" if s > 0 else "negative", before=before,
+                 after=hs.current(), velocity_before=rate, velocity_after=rate,
+                 release_force=float(force))
 
 
 def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -66,10 +68,12 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
         s = 1 if acc > 0.0 else -1 if acc < 0.0 else -hs.slip.get(joint, 1)
         hs.stick_at.pop(joint, None)
         hs.slip = {**slip, joint: s}
-        return Transition(Event(t, "slip", joint, "positive" if s > 0 else "negative",
-                                before, hs.current(), float(cd[k]), float(cd[k]), {}, 0.0,
-                                0.0, "", "the drivers move this joint through rest: the "
-                                "friction reverses with its rate"), q, v)
+        return Transition(Event(t=t, kind=EventKind.SLIP, joint=joint,
+                                side="positive" if s > 0 else "negative", before=before,
+                                after=hs.current(), velocity_before=float(cd[k]),
+                                velocity_after=float(cd[k]),
+                                note="the drivers move this joint through rest: the "
+                                     "friction reverses with its rate"), q, v)
     p = hs.params_of(trial, slip=slip)
     v0, imp = v, np.zeros(model.m)
     if cd[k] != 0.0:
@@ -80,7 +84,9 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     if abs(force) <= hs.static(joint):
         hs.locked = trial
         lost = float(0.5 * np.sum(model.mass * (v**2 - v0**2)))
-        return Transition(Event(t, "stick", joint, "stick", before, hs.current(),
-                                float(cd[k]), 0.0, impulses(model, imp), lost, float(force)),
-                          q, v0)
+        return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side="stick",
+                                before=before, after=hs.current(),
+                                velocity_before=float(cd[k]), velocity_after=0.0,
+                                impulses=impulses(model, imp), energy_lost=lost,
+                                release_force=float(force)), q, v0)
     return Transition(_begin_slip(hs, t, joint, force, before, float(cd[k])), q, v)

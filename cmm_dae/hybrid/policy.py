@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from ..core.records import Event
+from ..core.records import Event, EventKind
 from ..equations.kinematics import (
     dependent_rows,
     impact_map,
@@ -314,9 +314,11 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         if joint in hs.slip:  # it slides back the other way
             hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
-    kind = "bounce" if bounce else ("lock" if abs(cdm) <= policy.v_lock else "limit")
-    out.append(Transition(Event(t, kind, joint, side, before, hs.current(), cdm, cdp,
-                                impulses(model, imp), lost), q, v_plus))
+    kind = EventKind.BOUNCE if bounce else (
+        EventKind.LOCK if abs(cdm) <= policy.v_lock else EventKind.LIMIT)
+    out.append(Transition(Event(t=t, kind=kind, joint=joint, side=side, before=before,
+                                after=hs.current(), velocity_before=cdm, velocity_after=cdp,
+                                impulses=impulses(model, imp), energy_lost=lost), q, v_plus))
     if not bounce:
         force = hs.lock_force(q, v_plus, t, joint)
         if force < 0.0:  # the stop would have to pull at once: no chattering
@@ -345,8 +347,9 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
     if hs.model.mech.joints[joint].friction is not None:
         hs.slip = {**hs.slip, joint: away}
     cdv = joint_rate(hs.model, q, v, joint)
-    return Event(t, "release", joint, side, before, hs.current(), cdv, cdv, {}, 0.0,
-                 float(force))
+    return Event(t=t, kind=EventKind.RELEASE, joint=joint, side=side, before=before,
+                 after=hs.current(), velocity_before=cdv, velocity_after=cdv,
+                 release_force=float(force))
 
 
 def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,

@@ -12,7 +12,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import AssemblyError, ModelError, Problem
-from ..core.records import Event
+from ..core.records import Event, EventKind
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
@@ -224,7 +224,8 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
         if hs.lock_force(q, v, t0, name, trial) > 0.0:
             before = hs.current()
             hs.locked = trial
-            events.append(Event(t0, "lock", name, side, before, hs.current(), 0.0, 0.0))
+            events.append(Event(t=t0, kind=EventKind.LOCK, joint=name, side=side, before=before,
+                                after=hs.current()))
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
         if name in hs.locked:
             continue

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.records import Event
+from ..core.records import Event, EventKind
 from ..equations.model import Model
 from .state import HybridState, Transition
 
@@ -60,8 +60,10 @@ def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: flo
     before = hs.current()
     hs.zones = hs.zones | {load} if inside else hs.zones - {load}
     name = model.joint_names[k]
-    return Transition(Event(t, "zone", name, "enter" if inside else "leave", before,
-                            hs.current(), float(cd[k]), float(cd[k]), load=load), q, v)
+    return Transition(Event(t=t, kind=EventKind.ZONE, joint=name,
+                            side="enter" if inside else "leave", before=before,
+                            after=hs.current(), velocity_before=float(cd[k]),
+                            velocity_after=float(cd[k]), load=load), q, v)
 
 
 def initial_zones(model: Model, q: np.ndarray) -> frozenset[str]:

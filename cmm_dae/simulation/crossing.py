@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core.errors import SolverError, Status
-from ..core.records import Event
+from ..core.records import Event, EventKind
 from ..equations.kinematics import dependent_rows, rank_drop, row_names
 from ..hybrid import policy as ev
 from ..integrators.contract import Integrator, Recorder, RunOptions, SegmentEnd
@@ -120,8 +120,9 @@ def _event(t: float, labels: list[str], drop: int, ratio: float, how: str, side:
     # nothing is lost at a singular position (the velocities are continuous); the kinetic
     # energy changes across a crossing's window by the work of the forces, which the
     # energy audit books from the samples
-    return Event(t, "singular", joint, side, cfg, cfg, speed_before, speed_after, {}, 0.0,
-                 0.0, "", note)
+    return Event(t=t, kind=EventKind.SINGULAR, joint=joint, side=side, before=cfg,
+                 after=cfg, velocity_before=speed_before, velocity_after=speed_after,
+                 note=note)
 
 
 def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
