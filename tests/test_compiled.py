@@ -143,3 +143,25 @@ def test_cache_and_compiler_settings(monkeypatch, tmp_path):
     lib = tmp_path / "cmm_x.so"
     lib.write_bytes(b"\x7fELF" + bytes(100))
     assert not buffers.verified(lib, "x")  # no stamp: never trusted
+
+
+def test_another_scikit_sundae_falls_back_with_one_warning(monkeypatch):
+    """The driver declares SUNDIALS' prototypes by hand: with another scikit-sundae than
+    the one it was written for it is never built or loaded; compiled=True warns once and
+    runs the Python path (the same numbers)."""
+    import warnings
+
+    monkeypatch.setattr(csegment, "_driver", None)
+    monkeypatch.setattr(csegment, "_driver_error", None)
+    monkeypatch.setattr(csegment.sksundae, "__version__", "9.0.0")
+    with pytest.raises(OSError, match="scikit-sundae 9.0.0: the compiled segment was "
+                       "written for 1.2.x"):
+        csegment.check_version()
+    mech = cd.load(cd.example("pendulum_stop"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = cd.run_dae(mech, 0.5, compiled=True)
+    assert not res.meta["compiled"]
+    assert sum("scikit-sundae 9.0.0" in str(w.message) for w in caught) == 1
+    ref = cd.run_dae(mech, 0.5)
+    assert np.array_equal(res.joint("O").position, ref.joint("O").position)

@@ -63,11 +63,28 @@ def _sundials_libraries() -> list[Path]:
     return found
 
 
+#: The scikit-sundae releases (major.minor) whose SUNDIALS the driver's hand-written
+#: prototypes match: segment.c calls IDA through them, so another SUNDIALS could be called
+#: with the wrong arguments; pyproject.toml pins the same range.
+TESTED_SKSUNDAE = ("1.2",)
+
+
+def check_version(version: str | None = None) -> None:
+    """Raise OSError unless scikit-sundae's version is one the driver was written for."""
+    version = sksundae.__version__ if version is None else version
+    if ".".join(version.split(".")[:2]) not in TESTED_SKSUNDAE:
+        raise OSError(f"scikit-sundae {version}: the compiled segment was written for "
+                      f"{', '.join(v + '.x' for v in TESTED_SKSUNDAE)} (its SUNDIALS "
+                      "prototypes); running the Python path")
+
+
 def driver() -> ctypes.CDLL:
     """The compiled driver, built on first use. Raises OSError (no compiler, no SUNDIALS
-    libraries) or subprocess.SubprocessError (the build failed)."""
+    libraries, another scikit-sundae than the one it was written for) or
+    subprocess.SubprocessError (the build failed)."""
     global _driver
     if _driver is None:
+        check_version()  # before building or loading: a mismatch must never be called
         libs = _sundials_libraries()
         key = hashlib.sha256(_SOURCE.read_bytes() + "".join(map(str, libs)).encode()
                              ).hexdigest()[:20]
