@@ -407,3 +407,30 @@ def test_a_dotted_name_is_refused():
         cd.from_dict(d)
     assert any(p.table == "bodies.a.b" and "without '.'" in p.message
                for p in info.value.problems)
+
+
+def test_out_of_memory_building_the_model_is_said_as_such(monkeypatch):
+    """Running out of memory while the equations are built was reported as a mechanism
+    that cannot be assembled."""
+    from cmm_dae.simulation import runner
+
+    def no_memory(*a, **k):
+        raise MemoryError("cannot allocate 12 GiB")
+
+    monkeypatch.setattr(runner, "Model", no_memory)
+    with pytest.raises(cd.CmmError, match="out of memory while building the equations of "
+                       "'pendulum on a stop'") as info:
+        cd.run_dae(cd.load(cd.example("pendulum_stop")), 0.1)
+    assert not isinstance(info.value, cd.AssemblyError)
+
+
+@pytest.mark.parametrize("values,key", [({"joints.O.limits.lower": math.nan}, "limits.lower"),
+                                        ({"bodies.rod.colour": 1.0}, "bodies.rod.colour")])
+def test_write_model_refuses_unknown_keys_and_nan(tmp_path, values, key):
+    from cmm_dae.description.writer import write_model
+
+    mech = cd.load(cd.example("pendulum_stop"))
+    with pytest.raises(cd.ModelError) as info:
+        write_model(mech, tmp_path / "m.toml", values)
+    assert info.value.problems[0].key == key
+    assert not (tmp_path / "m.toml").exists()

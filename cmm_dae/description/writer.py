@@ -12,7 +12,7 @@ from typing import Any
 
 from ..core.errors import CmmError
 from .mechanism import Mechanism
-from .params import _point_ref
+from .params import _point_ref, with_params
 
 __all__ = ["dumps", "write_model"]
 
@@ -71,6 +71,9 @@ def write_model(mech: Mechanism, path: str | Path, values: Mapping[str, float], 
     CmmError
         ``mech`` was not loaded from a model file, or ``path`` exists and ``overwrite`` is
         False.
+    ModelError
+        A path that is not a parameter of the mechanism, or a value that is not a finite
+        number (checked as :func:`~cmm_dae.description.params.with_params` does).
     """
     path = Path(path)
     if mech.source is None or not Path(mech.source).is_file():
@@ -78,6 +81,9 @@ def write_model(mech: Mechanism, path: str | Path, values: Mapping[str, float], 
                        "to write the new values into")
     if path.exists() and not overwrite:
         raise CmmError(f"{path} exists; pass overwrite=True to replace it")
+    # every value a parameter of this mechanism and a finite number, checked before the
+    # file is written (it wrote unknown keys and NaN into model files)
+    with_params(mech, dict(values))
     data = tomllib.loads(Path(mech.source).read_text(encoding="utf-8"))
     for p, x in values.items():
         parts = p.split(".")

@@ -184,7 +184,11 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 "give it an inertia or a second joint that fixes its angle",
                 joints=[]) from e
         raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    except MemoryError as e:
+        raise _out_of_memory(mech, e) from e
     except (ArithmeticError, ValueError, RuntimeError) as e:
+        if "bad_alloc" in str(e) or "out of memory" in str(e).lower():
+            raise _out_of_memory(mech, e) from e  # CasADi's allocation failures
         raise AssemblyError(f"the initial state cannot be computed: {e}") from e
     stats = Stats(build_time=build, method=cls.method)
     rec = Recorder()
@@ -292,6 +296,14 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                           configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err
     return res
+
+
+def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:
+    """Running out of memory while the model or the start is built: said as such, not as
+    a mechanism that cannot be assembled."""
+    return CmmError(f"out of memory while building the equations of {mech.name!r} "
+                    f"({len(mech.bodies)} bodies, {len(mech.joints)} joints): "
+                    f"{type(e).__name__}: {e}. Free memory or simulate a smaller mechanism")
 
 
 def _drop_twin_passage(events: list, after: list[int], passed: list[tuple[float, int]],
