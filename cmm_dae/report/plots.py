@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import matplotlib
 import matplotlib.ticker
+import matplotlib.transforms
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -166,8 +167,11 @@ def timeline(results: list[Result], path: Path) -> Path:
             ax.plot(e.t, row, "kv", ms=5)
     ax.set_yticks(range(len(results)), [_label(r) for r in results])
     handles = [plt.Rectangle((0, 0), 1, 1, color=colors[i]) for i in range(len(labels))]
-    ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.35),
-              ncol=min(3, len(labels)), fontsize=8)
+    # below the time axis and its label, whatever the band's height (a fixed fraction of
+    # the axes put it over the label on one-run timelines)
+    below = matplotlib.transforms.offset_copy(ax.transAxes, fig=fig, y=-34, units="points")
+    ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+              bbox_transform=below, ncol=min(3, len(labels)), fontsize=8)
     ax.set(xlabel="time [s]", title=f"{results[0].meta['mechanism']}: configurations "
            "(bands) and events (triangles)")
     fig.tight_layout()
