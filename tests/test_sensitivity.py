@@ -62,6 +62,7 @@ def test_impact_time_independent_of_mass_when_inertia_scales():
     assert np.max(np.abs(m * pos[:, 0] + J * pos[:, 1])) < 1e-8 * np.max(np.abs(m * pos[:, 0]))
 
 
+@pytest.mark.slow  # over 20 s on one core (the whole suite still runs them)
 def test_double_folded_against_finite_differences():
     """Lock and release times, joint positions and the driving torque of the paper's
     mechanism, through the lock (plastic impact on E's stop) and the release."""

@@ -54,6 +54,7 @@ def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
     assert res.drift[0] <= 1e-9
 
 
+@pytest.mark.slow  # over 20 s on one core (the whole suite still runs them)
 def test_a02_n40_crosses_where_ida_gives_up_close_to_the_instant():
     """A02 with 40 loops at the default rtol 1e-8: IDA gives up so close to the singular
     instants that a crossing from there sees the velocities jump: at the first a dead point
@@ -358,6 +359,7 @@ def _a02_state(n: int, theta: float) -> tuple[np.ndarray, np.ndarray, float]:
     return np.ravel(q), np.ravel(v), w
 
 
+@pytest.mark.slow  # over 20 s on one core (the whole suite still runs them)
 def test_a02_n40_crossing_steps_end_at_the_instant_along_their_own_path():
     """A crossing from 0.48 rad before A02's horizontal crank position (40 loops, where
     IDA gave up at rtol 1e-11): its steps must end at the singular instant itself. With
