@@ -191,11 +191,9 @@ def _structure(args: argparse.Namespace) -> int:
 
 
 def _animate(args: argparse.Namespace) -> int:
-    from .report.animation import animate
+    from .report.animation import animate, gif_path
 
-    if Path(args.out).suffix.lower() != ".gif":
-        raise CmmError(f"--out {args.out!r}: the animation is written as a GIF; give a "
-                       "file name ending in .gif")
+    gif_path(args.out, "--out")  # before the run, not after it
     _refuse_overwrite([args.out], args.force)
     res = _result_of(args.source, args.t_end)
     print(f"wrote {animate(res, args.out, fps=args.fps, max_frames=args.frames)}")
@@ -305,14 +303,13 @@ def _sensitivities(args: argparse.Namespace) -> int:
 
 
 def _design(args: argparse.Namespace) -> int:
-    from .studies.design import DesignError
+    from .studies.design import REPORT_FILES, DesignError
     from .studies.studyfile import design_spec
 
     spec = design_spec(args.spec)
     out = Path(args.out) if args.out else spec.pop("out")
     # refused before the optimisation (tens of seconds), not after it
-    _refuse_overwrite([out / n for n in ("summary.md", "effort.png", "history.png",
-                                         "optimised.toml")], args.force)
+    _refuse_overwrite([out / n for n in REPORT_FILES], args.force)
     try:
         d = spec.pop("run_design")()
     except DesignError as e:

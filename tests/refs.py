@@ -176,12 +176,10 @@ def short_coupler_four_bar(tmp_path, ground: float):
 
 
 
-#: Options of each integration method (simulate refuses the other method's by name).
-_IDA_KEYS = {"rtol", "atol", "output_dt", "linsolver", "compiled"}
-_ITERATIVE_KEYS = {"dt", "output_every"}
-
-
 def for_method(method: str, **options) -> dict:
-    """The run options that apply to ``method``, from a set written for both."""
-    drop = _ITERATIVE_KEYS if method == "ida" else _IDA_KEYS
+    """The run options that apply to ``method``, from a set written for both (simulate
+    refuses the other method's by name)."""
+    from cmm_dae.simulation.options import IDA_DEFAULTS, ITERATIVE_DEFAULTS
+
+    drop = ITERATIVE_DEFAULTS if method == "ida" else IDA_DEFAULTS
     return {k: v for k, v in options.items() if k not in drop}

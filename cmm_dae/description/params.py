@@ -4,6 +4,7 @@ Sweeps, the equilibrium start and design studies all name parameters this way.""
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import replace
@@ -21,6 +22,7 @@ from .mechanism import (
     _frozen,
     require_mechanism,
 )
+from .schema import LAW_KEYS
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 #: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
@@ -37,10 +39,11 @@ _FIELDS = {
 }
 
 
-#: Law fields a load's dotted path may set (``loads.NAME.FIELD``), per law kind.
-_LAW_USES = {"constant": ("value",), "harmonic": ("mean", "amplitude", "frequency", "phase"),
-             "motor": ("stall", "no_load_speed"), "polynomial": (), "table": ()}
-_LAW_FIELDS = ("value", "mean", "amplitude", "frequency", "phase", "stall", "no_load_speed")
+#: Law fields a load's dotted path may set (``loads.NAME.FIELD``), per law kind: the
+#: schema's keys of each law but its lists.
+_LAW_USES = {kind: tuple(k for k in keys if k not in ("coefficients", "times", "values"))
+             for kind, keys in LAW_KEYS.items()}
+_LAW_FIELDS = tuple(dict.fromkeys(k for keys in _LAW_USES.values() for k in keys))
 
 #: Driver fields each motion law reads.
 _DRIVER_USES = {"constant_speed": ("initial", "speed"), "polynomial": (),
@@ -145,8 +148,6 @@ def examples(mech: Mechanism, n: int = 6) -> list[str]:
 
 def _hint(mech: Mechanism, parts: list[str]) -> str:
     """' (did you mean ...?)' for a misspelt table or name, else ''."""
-    import difflib
-
     names = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers,
              "elements": mech.elements, "loads": mech.loads}
     tables = [*names, "initial", "gravity", GROUND]

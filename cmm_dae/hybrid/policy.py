@@ -146,6 +146,11 @@ def resting_rate(cd: np.ndarray) -> float:
     return 1e-12 * max(1.0, float(np.max(np.abs(cd), initial=0.0)))
 
 
+def on_stop(c: float, L: float) -> bool:
+    """A joint coordinate ``c`` on its limit ``L`` to round-off (a start on the stop)."""
+    return abs(c - L) <= 1e-12 * max(1.0, abs(L))
+
+
 def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
     """Gaps that are zero at the start of a run and close: a joint that starts exactly on
     its stop, moving into it.
@@ -164,7 +169,7 @@ def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigge
         k = model.jidx[tr.joint]
         L = hs.limit_value(tr.joint, tr.side)
         into = cd[k] < -still if tr.side == "lower" else cd[k] > still
-        if into and abs(c[k] - L) <= 1e-12 * max(1.0, abs(L)):
+        if into and on_stop(c[k], L):
             out.append(tr)
     return out
 
@@ -299,10 +304,10 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     row = model.n_fixed + model.locks.index(joint)
     v_plus, imp = impact_map(model, q, v, t, p_locked, row, -e * cdm)
     cdp = -e * cdm
+    gap = policy.gap[0] * abs(hs.limit_value(joint, side)) + policy.gap[1]
     bounce = e > 0 and abs(cdp) > policy.v_lock and \
         not zeno(hs.bounces.get(joint, []), t, e, policy.resolution) and \
-        _rise(hs, q, v_plus, t, joint, side, cdp) > \
-        policy.gap[0] * abs(hs.limit_value(joint, side)) + policy.gap[1]
+        (gap == 0.0 or _rise(hs, q, v_plus, t, joint, side, cdp) > gap)
     if not bounce:
         v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
         cdp = 0.0

@@ -16,7 +16,7 @@ from ..core.records import Event, EventKind
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
-from .policy import resting_rate, stick_or_slip
+from .policy import on_stop, resting_rate, stick_or_slip
 from .state import HybridState
 from .zones import initial_zones
 
@@ -163,7 +163,7 @@ def assemble_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
         raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
                                  f"joint rates, got {len(names)}"), model.mech.source)
     _once(model, ("vrank", float(t), q.tobytes(), p.tobytes(), tuple(names)),
-          lambda: check_rank(model, J, act, names, t) or True)
+          lambda: check_rank(model, J, act, names, t))
     if J.shape[0] == J.shape[1]:
         return np.linalg.solve(J, rhs)
     v = np.linalg.lstsq(J, rhs, rcond=None)[0]  # redundant rows: consistent, least squares
@@ -208,16 +208,16 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     # A joint that assembles exactly on one of its limits (named in [initial] joints or
     # not) is a candidate for a start on the stop; one moving into it is the run's first
     # impact (events.start_triggers).
-    on_stop = {}
+    stops = {}
     for name in mech.limited_joints:
         lim = mech.joints[name].limits
         val = float(c0[model.jidx[name]])
         for side, L in (("lower", lim.lower), ("upper", lim.upper)):
-            if L is not None and abs(val - L) <= 1e-12 * max(1.0, abs(L)):
-                on_stop[name] = side
+            if L is not None and on_stop(val, L):
+                stops[name] = side
     events: list[Event] = []
     cd0 = model.joint_rates(q, v)[1]
-    for name, side in on_stop.items():
+    for name, side in stops.items():
         if abs(cd0[model.jidx[name]]) > resting_rate(cd0):
             continue  # moving in: an impact before the first step; moving out: free
         trial = {**hs.locked, name: side}

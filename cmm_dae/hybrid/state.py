@@ -229,9 +229,6 @@ def joint_acceleration(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, 
         float(np.max(np.abs(a), initial=0.0))
 
 
-# ------------------------------------------------------------------- decisions
-
-
 def joint_rate(model: Model, q: np.ndarray, v: np.ndarray, joint: str) -> float:
     return float(model.joint_rates(q, v)[1][model.jidx[joint]])
 

@@ -129,8 +129,9 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                 break
     except KeyboardInterrupt:
         interrupted()
+        # a root return (status 2) that the caller reads as the interruption
         return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
-                               i_events=np.zeros((1, 1), int), nfev=x.nfev, njev=x.njev)
+                               i_events=None, nfev=x.nfev, njev=x.njev)
     return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
                            message=x.message, i_events=x.i_events, nfev=x.nfev,
                            njev=x.njev)
@@ -569,7 +570,7 @@ class IdaIntegrator(Integrator):
         leaves the failure to the singular-position logic."""
         nz = self.u.nz
         cur = self.atol[:2 * nz]
-        new = np.maximum(cur, self.opts.atol)
+        new = np.empty_like(cur)
         for blk in (slice(0, nz), slice(nz, 2 * nz)):
             floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
             new[blk] = np.maximum(self.opts.atol, floor)

@@ -197,6 +197,16 @@ def _frames(res: Result, max_frames: int, dpi: int):
         plt.close(fig)
 
 
+def gif_path(path: str | Path, key: str = "path") -> Path:
+    """``path`` as a Path if it names a GIF file (the only format written), else a
+    CmmError naming ``key``."""
+    path = Path(path)
+    if path.suffix.lower() != ".gif":
+        raise CmmError(f"{key} {str(path)!r}: the animation is written as a GIF; give a file "
+                       "name ending in .gif")
+    return path
+
+
 def animate(res: Result, path: str | Path, *, fps: int = 20,
             max_frames: int = DEFAULT_FRAMES, dpi: int = 80) -> Path:
     """Write a GIF of the mechanism moving.
@@ -222,10 +232,7 @@ def animate(res: Result, path: str | Path, *, fps: int = 20,
 
     if not (isinstance(fps, int) and fps >= 1):
         raise CmmError(f"fps: expected a whole number >= 1 of frames per second, got {fps!r}")
-    path = Path(path)
-    if path.suffix.lower() != ".gif":
-        raise CmmError(f"path {str(path)!r}: the animation is written as a GIF; give a file "
-                       "name ending in .gif")
+    path = gif_path(path)
     images = [Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE, colors=64)
               for f in _frames(res, max_frames, dpi)]
     images[0].save(path, save_all=True, append_images=images[1:], loop=0,

@@ -39,6 +39,7 @@ import numpy as np
 from ..core.errors import CmmError, ModelError, Problem
 from ..description.mechanism import Mechanism, require_mechanism
 from ..description.params import path_problem
+from ..equations import rank
 from ..equations.model import Model
 from ..hybrid.equilibrium import solve_equilibrium
 from ..hybrid.start import redundant_base_rows
@@ -316,15 +317,13 @@ def _through_equilibrium(sp: SensitivityPass, res: Result, ev_t: np.ndarray,
     P = N N^T; at the solution P a = 0, so dP a = -P dJ^T (J J^T)^-1 J a. da comes from the
     start sample's own sensitivities; dJ (J's change with the start positions and the
     parameters) from central differences of J along each parameter's direction."""
-    from scipy.linalg import null_space
-
     model = sp.model
     q0, v0 = res.data["q"][0], res.data["v"][0]
     p0 = sp.params[0] if sp.params[0] is not None else model.params()
     act = model.active_rows(p0)
     a0, _, _ = model.kkt(q0, v0, 0.0, p0)
     J = sp.eq.pos(q0, 0.0, p0, sp.th)[1][act]
-    N = null_space(J)
+    N = rank.null_space(J, model.nq)  # the free motion, as the equilibrium start has it
     P = N @ N.T
     mu = np.linalg.lstsq(J @ J.T, J @ a0, rcond=None)[0]  # (J J^T)^-1 J a
     sq0, da0 = data["q"][0], data["a"][0]

@@ -13,6 +13,11 @@ from ..integrators.contract import RunOptions
 
 #: The integration methods, by name (the classes are the runner's).
 METHOD_NAMES = ("ida", "iterative")
+#: The defaults of the options that belong to one method (``simulate``, ``run_dae`` and
+#: ``run_iterative`` take them from here): another value with the other method is refused.
+IDA_DEFAULTS = {"rtol": 1e-8, "atol": None, "output_dt": 0.01, "linsolver": "auto",
+                "compiled": False}
+ITERATIVE_DEFAULTS = {"dt": 0.01, "output_every": 1}
 
 #: Most memory the output samples of one run may take (their post-processed arrays), bytes.
 MAX_OUTPUT_BYTES = 4 * 2**30
@@ -33,13 +38,13 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
     their default (they would be ignored), a prebuilt ``model`` of another mechanism."""
     bad: list[Problem] = []
     if method in METHOD_NAMES:
-        given = {"rtol": rtol != 1e-8, "atol": atol is not None,
-                 "output_dt": output_dt != 0.01, "linsolver": linsolver != "auto",
-                 "compiled": compiled is not False} if method == "iterative" else \
-            {"dt": dt != 0.01, "output_every": output_every != 1}
-        other = "ida" if method == "iterative" else "iterative"
+        given = {"rtol": rtol, "atol": atol, "output_dt": output_dt, "linsolver": linsolver,
+                 "compiled": compiled, "dt": dt, "output_every": output_every}
+        other, defaults = (("ida", IDA_DEFAULTS) if method == "iterative"
+                           else ("iterative", ITERATIVE_DEFAULTS))
         bad += [Problem("run", k, f"applies to method=\"{other}\" only; this run is "
-                        f"method=\"{method}\"") for k, on in given.items() if on]
+                        f"method=\"{method}\"") for k, d in defaults.items()
+                if given[k] is not d and given[k] != d]
     if linsolver not in ("auto", "dense", "sparse"):
         bad.append(Problem("run", "linsolver", f"expected 'auto', 'dense' or 'sparse', "
                            f"got {linsolver!r}"))

@@ -33,7 +33,7 @@ from ..integrators.iterative import IterativeIntegrator
 from ..results.post import build_result
 from ..results.result import Result
 from .crossing import cross_singular, log_stepped_over
-from .options import branch_rule, check_options
+from .options import IDA_DEFAULTS, ITERATIVE_DEFAULTS, branch_rule, check_options
 from .passage import passage_cut, watch_segment
 
 #: The integration methods, by name.
@@ -57,12 +57,15 @@ def _one_blas_thread():
 
 
 def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
-             rtol: float = 1e-8, atol: float | None = None, output_dt: float | None = 0.01,
-             dt: float = 0.01, output_every: int = 1, max_events: int = 1000,
+             rtol: float = IDA_DEFAULTS["rtol"], atol: float | None = IDA_DEFAULTS["atol"],
+             output_dt: float | None = IDA_DEFAULTS["output_dt"],
+             dt: float = ITERATIVE_DEFAULTS["dt"],
+             output_every: int = ITERATIVE_DEFAULTS["output_every"], max_events: int = 1000,
              v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
              model: Model | None = None, progress: bool = False,
-             branch: str | tuple[str, int] = "continue", compiled: bool = False,
-             linsolver: str = "auto", _trace: list | None = None) -> Result:
+             branch: str | tuple[str, int] = "continue",
+             compiled: bool = IDA_DEFAULTS["compiled"],
+             linsolver: str = IDA_DEFAULTS["linsolver"], _trace: list | None = None) -> Result:
     """Simulate a mechanism from t = 0 to ``t_end`` with IDA or the paper's algorithm.
 
     Parameters
@@ -202,11 +205,8 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         seen: set = set()
         while starting := [x for x in ev.start_triggers(hs, q, v) if x not in seen]:
             seen.add(starting[0])  # a rejected trigger (a joint leaving) is not asked again
-            for tr in ev.handle(hs, starting[0], q, v, 0.0, integ.policy):
-                events.append(tr.event)
-                q, v = tr.q, tr.v
-                rec.add(0.0, q, v, tr.event.after)
-                after.append(len(rec) - 1)
+            q, v = _apply(ev.handle(hs, starting[0], q, v, 0.0, integ.policy), 0.0, q, v,
+                          events, rec, after, integ, opts)
         if trace is not None:
             trace.append((q.copy(), v.copy(), list(events)))
         while True:
@@ -242,17 +242,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 done = ev.handle(hs, trig, q, v, t, integ.policy)
                 if seg is not None:
                     seg.groups.append((trig, done, [hs.params[x.event.after] for x in done]))
-                for tr in done:
-                    events.append(tr.event)
-                    q, v = tr.q, tr.v
-                    rec.add(t, q, v, tr.event.after)
-                    after.append(len(rec) - 1)
-                    if len(events) > opts.max_events:
-                        e = tr.event
-                        raise SolverError(f"max_events = {opts.max_events} reached at t = "
-                                          f"{t:.9g} s (last: {e.kind} of joint {e.joint})",
-                                          status=Status.MAX_EVENTS)
-                integ.after_events(done)
+                q, v = _apply(done, t, q, v, events, rec, after, integ, opts)
             if end.reason == "singular":
                 n_events = len(events)
                 # a segment that recorded nothing restarts the last crossing, whose
@@ -298,6 +288,24 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     return res
 
 
+def _apply(done: list, t: float, q: np.ndarray, v: np.ndarray, events: list, rec: Recorder,
+           after: list[int], integ: Integrator, opts: RunOptions
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Book the transitions the policy decided at time t (an event and a sample after each,
+    the event budget checked), tell the integrator, and return the state after them."""
+    for tr in done:
+        events.append(tr.event)
+        q, v = tr.q, tr.v
+        rec.add(t, q, v, tr.event.after)
+        after.append(len(rec) - 1)
+        if len(events) > opts.max_events:
+            e = tr.event
+            raise SolverError(f"max_events = {opts.max_events} reached at t = {t:.9g} s "
+                              f"(last: {e.kind} of joint {e.joint})", status=Status.MAX_EVENTS)
+    integ.after_events(done)
+    return q, v
+
+
 def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:
     """Running out of memory while the model or the start is built: said as such, not as
     a mechanism that cannot be assembled."""
@@ -323,13 +331,14 @@ def _drop_twin_passage(events: list, after: list[int], passed: list[tuple[float,
     del events[i], after[i]
 
 
-def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8,
-            atol: float | None = None,
-            output_dt: float | None = 0.01, max_events: int = 1000, v_lock: float = 1e-6,
-            max_steps: int | None = None, throw: bool = True,
+def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = IDA_DEFAULTS["rtol"],
+            atol: float | None = IDA_DEFAULTS["atol"],
+            output_dt: float | None = IDA_DEFAULTS["output_dt"], max_events: int = 1000,
+            v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
             model: Model | None = None, progress: bool = False,
-            branch: str | tuple[str, int] = "continue", compiled: bool = False,
-            linsolver: str = "auto") -> Result:
+            branch: str | tuple[str, int] = "continue",
+            compiled: bool = IDA_DEFAULTS["compiled"],
+            linsolver: str = IDA_DEFAULTS["linsolver"]) -> Result:
     """:func:`simulate` with IDA (``method="ida"``); see there for the parameters."""
     require_mechanism(mech, "run_dae")
     return simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
@@ -338,8 +347,10 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = 1e-8,
                     linsolver=linsolver)
 
 
-def run_iterative(mech: Mechanism, t_end: float = 10.0, *, dt: float = 0.01,
-                  output_every: int = 1, v_lock: float = 1e-6, max_events: int = 1000,
+def run_iterative(mech: Mechanism, t_end: float = 10.0, *,
+                  dt: float = ITERATIVE_DEFAULTS["dt"],
+                  output_every: int = ITERATIVE_DEFAULTS["output_every"],
+                  v_lock: float = 1e-6, max_events: int = 1000,
                   max_steps: int | None = None, throw: bool = True,
                   model: Model | None = None, progress: bool = False,
                   branch: str | tuple[str, int] = "continue") -> Result:

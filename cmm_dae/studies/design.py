@@ -29,6 +29,10 @@ from .targets import Target, parse_target
 __all__ = ["Design", "DesignError", "Target", "design", "peak_effort"]
 
 
+#: The files a design report writes into its folder (checked for overwriting up front).
+REPORT_FILES = ("summary.md", "effort.png", "history.png", "optimised.toml")
+
+
 class DesignError(CmmError):
     """A design the optimiser tried could not be run (a dead point, a changed event
     sequence); ``history`` holds the designs evaluated before it."""
@@ -127,8 +131,7 @@ class Design:
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        files = [out / n for n in ("summary.md", "effort.png", "history.png",
-                                   "optimised.toml")]
+        files = [out / n for n in REPORT_FILES]
         if not overwrite:
             there = [str(f) for f in files if f.exists()]
             if there:

@@ -302,39 +302,33 @@ def _run_pool(todo: list[int], n: int, args: tuple, finish: Callable) -> None:
     Ctrl-C cancels the queued cases and stops the workers at once (the finished rows are
     in the checkpoint already) and is raised again."""
     mech, cases, t_end, metrics, run_options = args
-    queue = list(todo)
-    while queue:
-        pool = ProcessPoolExecutor(max_workers=n)
-        pending = {pool.submit(run_case, mech, cases[i], t_end, metrics, run_options): i
-                   for i in queue}
-        queue = []
-        broken: list[int] = []
-        try:
-            while pending:
-                fin, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in fin:
-                    i = pending.pop(fut)
-                    try:
-                        finish(i, fut.result())
-                    except BrokenProcessPool:
-                        broken.append(i)
-        except KeyboardInterrupt:
-            procs = list((getattr(pool, "_processes", None) or {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for proc in procs:  # the cases already running are not waited for either
-                proc.terminate()
-            raise
-        pool.shutdown(wait=True)
-        if not broken:
-            return
-        if len(broken) == 1 and n == 1:  # alone, and it died again: that case kills it
-            finish(broken[0], {**cases[broken[0]], "status": "error",
-                               "message": "the worker process running this case died "
-                                          "(a crash or out of memory)",
-                               "t_reached": math.nan})
-            continue
-        for i in broken:  # one at a time, to find the one that kills its worker
-            _run_pool([i], 1, args, finish)
+    pool = ProcessPoolExecutor(max_workers=n)
+    pending = {pool.submit(run_case, mech, cases[i], t_end, metrics, run_options): i
+               for i in todo}
+    broken: list[int] = []
+    try:
+        while pending:
+            fin, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in fin:
+                i = pending.pop(fut)
+                try:
+                    finish(i, fut.result())
+                except BrokenProcessPool:
+                    broken.append(i)
+    except KeyboardInterrupt:
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:  # the cases already running are not waited for either
+            proc.terminate()
+        raise
+    pool.shutdown(wait=True)
+    if broken == todo and n == 1:  # alone in its pool, and it died again: it kills it
+        finish(todo[0], {**cases[todo[0]], "status": "error",
+                         "message": "the worker process running this case died (a crash "
+                                    "or out of memory)", "t_reached": math.nan})
+        return
+    for i in broken:  # one at a time, to find the one that kills its worker
+        _run_pool([i], 1, args, finish)
 
 
 def parse_range(spec: str) -> tuple[str, list[float]]:
