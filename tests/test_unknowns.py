@@ -69,9 +69,11 @@ def test_centroid_coordinates_still_available_and_agree():
 
 def test_a_driven_pin_stays_in_centroid_coordinates():
     """A ground joint with a driver keeps its body in centroid coordinates (its angle is
-    prescribed); the double-folded cycle's other bodies have no ground pin."""
+    prescribed); the double-folded cycle's other bodies have no ground pin. Its IDA
+    unknowns are the model's plus the two works it has (the driver's and the dampers')."""
     model = Model(cd.load(MODELS / "double_folded.toml"))
-    assert not model.ida.reduced and model.ida.N == model.N
+    assert not model.ida.reduced and model.ida.powered == (0, 2)
+    assert model.ida.N == model.N + 2
 
 
 def test_redundant_set_keeps_the_pins_rows():

@@ -362,6 +362,26 @@ class Model:
             return ca.vertcat(qp - v + Phi_q.T @ mu, Mdiag * vp + Phi_q.T @ lam - Qf,
                               phi + free * mu, h + free * lam)
 
+        # The powers IDA integrates with the motion (its quadratures, the energy audit's
+        # works and losses): the drivers', the loads', the dampers' (joints and elements)
+        # and the kinetic friction's. The drivers' is the constraint forces' power
+        # lambda . Phi_t (only driver rows depend on t; dropped rows do not change it).
+        # Written v . (M a - Q) with IDA's accelerations instead, a driven rod's work was
+        # 15x less accurate (1e-6 J against 7.7e-8 at rtol 1e-8): y' is one order less
+        # accurate than y. The multipliers, held to ATOL_LAMBDA, stall it at about 1e-9
+        # of the work from rtol 1e-10 on.
+        diss = ca.SX(0)
+        for name, j in smech.joints.items():
+            if j.damper is not None:
+                diss += j.damper.damping * cdot[jidx[name]] ** 2
+        for el, rate in zip(smech.elements.values(), el_rate, strict=True):
+            diss += el.damping * rate**2
+        fr = ca.SX(0)
+        for f, name in enumerate(self.frictional):
+            fr += (smech.joints[name].friction.kinetic * p[2 * nl + nz + f]
+                   * cdot[jidx[name]])
+        powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
+                            diss, fr)
         #: the symbolic equations with the parameters theta free (sensitivities)
         self.sym = {"q": q, "v": v, "a": a, "t": t, "p": p, "theta": self.theta,
                     "phi": phi, "Phi_q": Phi_q, "Phi_t": Phi_t, "h": h, "gamma": gamma,
@@ -370,10 +390,11 @@ class Model:
                     "P": P, "y": y, "yp": yp, "lam": lam,
                     "F": ggl(Phi_q, Qf, phi, h, Mdiag)}
         if self.theta_paths:  # the numeric functions below hold the parameters' values
-            (phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag,
+            (phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, powers,
              *ex) = ca.substitute(
-                [phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, *el_len,
-                 *el_rate, *el_ten, *load_val, *load_pow], [self.theta], [ca.DM(self.theta0)])
+                [phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, powers,
+                 *el_len, *el_rate, *el_ten, *load_val, *load_pow], [self.theta],
+                [ca.DM(self.theta0)])
             ne, nld = len(el_len), len(load_val)
             el_len, el_rate, el_ten = ex[:ne], ex[ne:2 * ne], ex[2 * ne:3 * ne]
             load_val, load_pow = ex[3 * ne:3 * ne + nld], ex[3 * ne + nld:]
@@ -398,6 +419,11 @@ class Model:
         self.extras_fn = ca.Function("extras", [q, v, t, p],
                                      [col(el_len), col(el_rate), col(el_ten), col(load_val),
                                       col(load_pow)])
+        #: the powers (W) of the drivers, the loads, the dampers (dissipated) and kinetic
+        #: friction (lost) at (q, v, lambda, t, p), which IDA integrates with the motion
+        self.power_fn = ca.Function("powers", [q, v, lam, t, p], [dn(powers)])
+        #: which of those powers the mechanism has at all (not identically zero)
+        self.powered = tuple(k for k in range(powers.numel()) if not powers[k].is_zero())
         self.free_fn = ca.Function("free", [p], [dn(free)])
         # single-point evaluations for the step-by-step paths (private: callers use the
         # named methods below)
@@ -448,12 +474,10 @@ class Model:
         #: what IDA integrates (:class:`~cmm_dae.equations.unknowns.Unknowns`)
         self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)
         self.compiled = False
-        if compiled:  # one library for the model's functions and IDA's
-            extra = [self.ida.res_fn, self.ida.jac_fn] if self.ida.reduced else []
-            funcs = compile_functions([self.res_fn, self.jac_fn, *extra])
+        if compiled:  # IDA's residual and Jacobian (the model's are its core) in C
+            funcs = compile_functions([self.ida.res_fn, self.ida.jac_fn])
             if funcs is not None:
-                self.res_fn, self.jac_fn = funcs[:2]
-                self.ida.res_fn, self.ida.jac_fn = funcs[2:] if extra else funcs[:2]
+                self.ida.res_fn, self.ida.jac_fn = funcs
                 self.compiled = True
 
     # ------------------------------------------------------------- named interface

@@ -21,6 +21,12 @@ the steps the angle alone needs (a reference point at the pivot, with linear con
 took 0.9x; see ``validation/a01_steps.py``). Everything IDA returns is mapped back to
 centroid coordinates at once, so nothing downstream sees the difference; the reactions of
 the eliminated joints come, like all reactions, from the KKT solve of post-processing.
+
+Besides the motion IDA integrates the works of the drivers, the loads, the dampers and
+kinetic friction (:data:`WORKS`, J) as quadratures ``W' = P(q, v, lambda, t, p)``, the
+powers of :attr:`~cmm_dae.equations.model.Model.power_fn`: the energy audit then holds to
+the solver's tolerance on any output grid. They sit between the rates and the multipliers,
+``y = [z, w, W, lambda, mu]``, and start at zero in every segment.
 """
 from __future__ import annotations
 
@@ -48,8 +54,15 @@ def ground_pins(mech: Mechanism) -> dict[str, str]:
     return pins
 
 
+#: The works IDA integrates with the motion (J), in the order of ``Model.power_fn``: the
+#: drivers' and the loads' work done on the mechanism, the dampers' dissipation and the
+#: loss to kinetic friction.
+WORKS = ("driver", "load", "damper", "friction")
+NW = len(WORKS)
+
+
 class Unknowns:
-    """IDA's unknowns ``y = [z, w, lambda_r, mu_r]`` and its residual for a model.
+    """IDA's unknowns ``y = [z, w, W, lambda_r, mu_r]`` and its residual for a model.
 
     Attributes
     ----------
@@ -59,12 +72,17 @@ class Unknowns:
         Indices into q of IDA's coordinates z (``z = q[sel]``, ``w = v[sel]``).
     nz : int
         Number of IDA's coordinates.
+    powered : tuple of int
+        The works the mechanism has (indices into :data:`WORKS`; one that is identically
+        zero, as the drivers' on a mechanism without drivers, is not integrated).
+    nw : int
+        Number of them, at ``y[2 nz:2 nz + nw]``.
     rows : ndarray of int
         The model's constraint rows that stay in the DAE (indices into ``model.rows``).
     m : int
         Number of them.
     N : int
-        IDA's number of unknowns, ``2 nz + 2 m``.
+        IDA's number of unknowns, ``2 nz + nw + 2 m``.
     """
 
     def __init__(self, model: Any, pinned: dict[str, str], q, v, t, p, phi, Qf, free,
@@ -73,16 +91,45 @@ class Unknowns:
         # this module sits below it)
         self.model = model
         self.pinned = dict(pinned)
+        #: (a work identically zero is left out: every unknown IDA carries counts in the
+        #: norm of its error test, and four that are always zero loosened A02's steps)
+        self.powered = model.powered
+        self.nw = nw = len(self.powered)
         nq = model.nq
-        if not pinned:  # the model's own residual: nothing to map
+        self._full = None
+        if not pinned:  # the model's own residual, in centroid coordinates
             self.sel = np.arange(nq)
             self.rows = np.arange(model.m)
-            self.nz, self.m, self.N = nq, model.m, model.N
-            self.res_fn, self.jac_fn = model.res_fn, model.jac_fn
-            self.jac_sparse_fn, self.jac_pattern = model.jac_sparse_fn, model.jac_pattern
-            self.res_sx = model.res_sx
-            self._full = None
-            return
+            self.nz, self.m = nq, model.m
+            core_res, core_jac = model.res_fn, model.jac_sparse_fn
+        else:
+            core_res, core_jac = self._reduced(pinned, q, v, t, p, phi, Qf, free, Mdiag)
+        nz, m = self.nz, self.m
+        self.N = N = 2 * nz + nw + 2 * m
+        # the core's unknowns within IDA's: the works sit between the rates and lambda
+        idx = list(range(2 * nz)) + list(range(2 * nz + nw, N))
+        S = ca.DM(ca.Sparsity.triplet(len(idx), N, list(range(len(idx))), idx), 1.0)
+        ta, cj = ca.SX.sym("t"), ca.SX.sym("cj")
+        pa = ca.SX.sym("p", model.n_params)
+        y, yp = ca.SX.sym("y", N), ca.SX.sym("yp", N)
+        yc, ypc = ca.mtimes(S, y), ca.mtimes(S, yp)
+        qs, vs, lams = self.symbolic(y)
+        Fw = yp[2 * nz:2 * nz + nw] - model.power_fn(qs, vs, lams, ta, pa)[list(
+            self.powered)]
+        F = ca.vertcat(core_res(ta, yc, ypc, pa), Fw)
+        J = ca.vertcat(ca.mtimes(core_jac(ta, yc, ypc, cj, pa), S),
+                       ca.jacobian(Fw, y) + cj * ca.jacobian(Fw, yp))
+        self.res_fn = self.res_sx = ca.Function("ida_res", [ta, y, yp, pa], [F])
+        # transposed, as the model's: CasADi writes column-major, scikit-sundae row-major
+        self.jac_fn = ca.Function("ida_resjac", [ta, y, yp, cj, pa], [ca.densify(J.T)])
+        self.jac_sparse_fn = ca.Function("ida_resjac_sp", [ta, y, yp, cj, pa], [J])
+        self.jac_pattern = J.sparsity()
+
+    def _reduced(self, pinned, q, v, t, p, phi, Qf, free, Mdiag
+                 ) -> tuple[ca.Function, ca.Function]:
+        """The residual and its sparse Jacobian on ``[z, w, lambda_r, mu_r]`` (bodies
+        pinned by their angles), and the maps back to centroid coordinates."""
+        model = self.model
         mech = model.mech
         joints = set(pinned.values())
         self.rows = np.array([k for k, r in enumerate(model.rows)
@@ -93,7 +140,6 @@ class Unknowns:
         self.sel = np.array(sel, dtype=int)
         self.nz = nz = len(sel)
         self.m = m = len(self.rows)
-        self.N = N = 2 * nz + 2 * m
         z = ca.SX.sym("z", nz)
         w = ca.SX.sym("w", nz)
         parts, k = [], 0
@@ -126,18 +172,13 @@ class Unknowns:
         lam = ca.SX.sym("lam", m)
         mu = ca.SX.sym("mu", m)
         y = ca.vertcat(z, w, lam, mu)
-        yp = ca.SX.sym("yp", N)
+        yp = ca.SX.sym("yp", 2 * nz + 2 * m)
         zp, wp = yp[:nz], yp[nz:2 * nz]
         acc = T @ wp + ca.jacobian(vz, z) @ w
         F = ca.vertcat(zp - w + Gz.T @ mu, T.T @ (Mdiag * acc - Q_f) + Gz.T @ lam,
                        phi_r + free_r * mu, h_r + free_r * lam)
         cj = ca.SX.sym("cj")
         J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
-        self.res_fn = self.res_sx = ca.Function("ida_res", [t, y, yp, p], [F])
-        # transposed, as the model's: CasADi writes column-major, scikit-sundae row-major
-        self.jac_fn = ca.Function("ida_resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
-        self.jac_sparse_fn = ca.Function("ida_resjac_sp", [t, y, yp, cj, p], [J])
-        self.jac_pattern = J.sparsity()
         yz = ca.SX.sym("yz", 2 * nz)
         self._full = ca.Function("centroids", [yz], [ca.densify(ca.vertcat(
             ca.substitute(qz, z, yz[:nz]),
@@ -148,20 +189,38 @@ class Unknowns:
         self._select = ca.DM(model.m, m)
         for k, i in enumerate(self.rows.tolist()):
             self._select[i, k] = 1.0
+        return (ca.Function("core_res", [t, y, yp, p], [F]),
+                ca.Function("core_jac", [t, y, yp, cj, p], [J]))
 
     @property
     def reduced(self) -> bool:
         """Whether any body is integrated by its angle alone."""
         return bool(self.pinned)
 
-    def start(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def lam(self) -> slice:
+        """Where IDA's multipliers lambda sit in y."""
+        start = 2 * self.nz + self.nw
+        return slice(start, start + self.m)
+
+    def start(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray,
+              t: float, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """IDA's (y, y') from a consistent state: centroid coordinates, rates and
-        accelerations and the multipliers of every model row (mu = 0)."""
+        accelerations and the multipliers of every model row (mu = 0) at t (s) with the
+        configuration's parameters p; the works start at zero at their powers' rate."""
         s, r = self.sel, self.rows
-        y = np.concatenate([q[s], v[s], lam[r], np.zeros(self.m)])
-        yp = np.concatenate([v[s], a[s], np.zeros(2 * self.m)])
+        P = np.asarray(self.model.power_fn(q, v, lam, t, p), dtype=float).ravel()[
+            list(self.powered)]
+        y = np.concatenate([q[s], v[s], np.zeros(self.nw), lam[r], np.zeros(self.m)])
+        yp = np.concatenate([v[s], a[s], P, np.zeros(2 * self.m)])
         return y, yp
+
+    def works(self, Y: np.ndarray) -> np.ndarray:
+        """The works (n, :data:`NW`) in J since the segment's start, of IDA's states Y
+        (zero for those the mechanism does not have)."""
+        out = np.zeros((Y.shape[0], NW))
+        out[:, list(self.powered)] = Y[:, 2 * self.nz:2 * self.nz + self.nw]
+        return out
 
     def centroids(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Centroid coordinates and rates (n, nq) of IDA's states Y (n, >= 2 nz)."""
@@ -180,11 +239,11 @@ class Unknowns:
     def symbolic(self, y) -> tuple:
         """Centroid coordinates, rates and every model row's multiplier (zero for an
         eliminated row) as expressions of IDA's y (CasADi SX or MX)."""
-        nz, m = self.nz, self.m
+        nz, lam = self.nz, y[self.lam]
         if self._full is None:
             nq = self.model.nq
-            return y[:nq], y[nq:2 * nq], y[2 * nq:2 * nq + m]
+            return y[:nq], y[nq:2 * nq], lam
         qv = self._full(y[:2 * nz])
         nq = self.model.nq
-        lam = ca.mtimes(self._select, y[2 * nz:2 * nz + m])
+        lam = ca.mtimes(self._select, lam)
         return qv[:nq], qv[nq:], lam

@@ -52,6 +52,7 @@ __all__ = [
     "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
     "impact_map", "initial_zones", "over_constrained", "project_positions",
     "project_velocities", "release", "resting_rate", "start_triggers", "stick_or_slip",
+    "zone_edges",
     "would_reenter", "zeno", "zone_switch",
 ]
 
@@ -171,7 +172,20 @@ def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigge
         into = cd[k] < -still if tr.side == "lower" else cd[k] > still
         if into and on_stop(c[k], L):
             out.append(tr)
-    return out
+    return out + zone_edges(hs, q, v)
+
+
+def zone_edges(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
+    """Zones whose event function is not positive where a segment starts: a coordinate on
+    an edge and already moving in or out (a joint released from a stop at a zone's edge),
+    where a root finder sees no sign change and the zone would be missed. Decided here,
+    by the direction of motion (:func:`zone_switch`), before the segment is integrated."""
+    model = hs.model
+    if not model.zoned:
+        return []
+    c, cd = model.joint_rates(q, v)
+    return [tr for tr in event_list(model, hs.locked)
+            if tr.kind == "zone" and _zone_margin(hs, tr.joint, c, cd) <= 0.0]
 
 
 def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,

@@ -19,6 +19,7 @@ import numpy as np
 from ..core.progress import Bar
 from ..core.records import Stats
 from ..equations.model import Model
+from ..equations.unknowns import NW
 from ..hybrid.state import ZENO_DT, HybridState, Policy, Transition, Trigger
 
 
@@ -69,13 +70,16 @@ class SegmentEnd:
 
 
 class Recorder:
-    """Output samples (t, q, v, configuration index), appended in time order.
+    """Output samples (t, q, v, configuration index), appended in time order, and with
+    each the works (J, :data:`~cmm_dae.equations.unknowns.WORKS`) done since the sample
+    before it, where the integrator integrated them (NaN where it did not: the audit
+    integrates those stretches over the samples).
 
     Kept as blocks of copies: a segment's rows are never views into the integrator's own
     output (which holds the multipliers too and would stay alive with them)."""
 
     def __init__(self) -> None:
-        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._blocks: list[tuple[np.ndarray, ...]] = []
         self._single: list[tuple[float, np.ndarray, np.ndarray, int]] = []
         self._n = 0
 
@@ -97,15 +101,20 @@ class Recorder:
         if self._single:
             t, q, v, c = zip(*self._single, strict=True)
             self._blocks.append((np.array(t, dtype=float), np.array(q), np.array(v),
-                                 np.array(c, dtype=int)))
+                                 np.array(c, dtype=int), np.full((len(t), NW), np.nan)))
             self._single = []
 
-    def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int) -> None:
+    def add_block(self, t: np.ndarray, q: np.ndarray, v: np.ndarray, c: int,
+                  work: np.ndarray | None = None) -> None:
+        """Samples of one configuration; ``work`` (n, NW): each one's works since the
+        sample before it (J)."""
         if t.size == 0:
             return
         self._flush()
         self._blocks.append((np.array(t, dtype=float), np.array(q, dtype=float),
-                             np.array(v, dtype=float), np.full(t.size, c, dtype=int)))
+                             np.array(v, dtype=float), np.full(t.size, c, dtype=int),
+                             np.full((t.size, NW), np.nan) if work is None
+                             else np.array(work, dtype=float).reshape(t.size, NW)))
         self._n += t.size
 
     def since(self, n0: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -141,6 +150,14 @@ class Recorder:
             return np.zeros(0), np.zeros((0, nq)), np.zeros((0, nq)), np.zeros(0, int)
         return tuple(np.concatenate([b[i] for b in self._blocks]).reshape(
             (self._n, nq) if i in (1, 2) else (self._n,)) for i in range(4))
+
+    def works(self) -> np.ndarray:
+        """Each sample's works (n, NW) in J since the sample before it (NaN: not
+        integrated by the integrator)."""
+        self._flush()
+        if not self._blocks:
+            return np.zeros((0, NW))
+        return np.concatenate([b[4] for b in self._blocks])
 
 
 class Integrator(ABC):

@@ -128,7 +128,7 @@ class SegmentRun:
     """What a segment returns, in the shape of scikit-sundae's result (rows from t0)."""
 
     t: np.ndarray
-    y: np.ndarray  # q and v only
+    y: np.ndarray  # the differential unknowns only (coordinates, rates, works)
     status: int
     message: str
     i_events: np.ndarray | None
@@ -201,7 +201,7 @@ class CompiledModel:
         p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float)
                                        for a in (p, y0, yp0, atol, tspan[1:]))
         seg = lib.cmm_seg_new(
-            N, ne, 2 * model.ida.nz, self.res[0], self.res[1], self.jac[0], self.jac[1],
+            N, ne, model.ida.lam.start, self.res[0], self.res[1], self.jac[0], self.jac[1],
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
             D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed),
@@ -209,7 +209,8 @@ class CompiledModel:
             self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse))
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
-        ncol = 2 * model.ida.nz  # only IDA's coordinates and rates are recorded
+        # IDA's coordinates, rates and works are recorded (the differential unknowns)
+        ncol = model.ida.lam.start
         T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :ncol].copy()]
         info = np.zeros(ne, dtype=np.intc)
         stats = np.zeros(3, dtype=np.int_)

@@ -36,7 +36,7 @@ from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
 from . import csegment
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
-from .tolerances import ATOL_LAMBDA, ATOL_MU, lambda_atol, lambda_scale
+from .tolerances import ATOL_LAMBDA, ATOL_MU, ATOL_WORK, lambda_atol, lambda_scale
 
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
 #: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
@@ -154,12 +154,18 @@ ROUNDOFF_ATOL = 10.0 * np.finfo(float).eps
 #: IDA failure to count as the state having outgrown it (see ``_roundoff_atol``).
 OUTGROWN = 100.0
 
-#: Consecutive IDA steps that leave t where it was (steps below its round-off) after which
-#: the segment ends as a failure at that state. Next to a singular position IDA halved its
-#: step below t's spacing and then took about a million steps in place (A02 at rtol 1e-10
-#: from t0 = 0, where a step floor relative to t0 is zero); whether that happened hung on
-#: round-off, and it ran for an hour. The failure goes to the crossing like any other.
+#: Consecutive IDA steps that leave t where it was, or move it by less than
+#: :data:`CRAWL_STEP` of the run's time scale, after which the segment ends as a failure at
+#: that state. Next to a singular position IDA halved its step below t's spacing and then
+#: took about a million steps in place (A02 at rtol 1e-10 from t0 = 0, where a step floor
+#: relative to t0 is zero); whether that happened hung on round-off, and it ran for an
+#: hour. Started 0.05 rad from it at rtol 1e-11, IDA took steps of 2e-19 s that did move t,
+#: 500,000 of them, where a different rounding had made it fail at once. The failure goes
+#: to the crossing like any other.
 IN_PLACE_STEPS = 50
+#: A step shorter than this many units of round-off of the run's time scale counts as in
+#: place (about 1e-15 s on a 1-s run; IDA's steps there are 1e-7 s and more).
+CRAWL_STEP = 16.0
 
 
 class IdaIntegrator(Integrator):
@@ -206,8 +212,16 @@ class IdaIntegrator(Integrator):
             self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
                 (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
                 shape=(u.N, u.N))}
-        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol), np.full(u.m, ATOL_LAMBDA),
-                                    np.full(u.m, ATOL_MU)])
+        # The works (J) are out of the error test (ATOL_WORK). IDA's norm is a mean over
+        # all N unknowns, so nw more with zero error would loosen the test on the motion
+        # by sqrt(N / (N - nw)): every other tolerance is scaled by its inverse, and the
+        # test reads as it did without them.
+        self.tol_scale = math.sqrt((u.N - u.nw) / u.N) if u.N else 1.0
+        self.rtol = opts.rtol * self.tol_scale
+        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol), np.full(u.nw, ATOL_WORK),
+                                    np.full(u.m, ATOL_LAMBDA), np.full(u.m, ATOL_MU)])
+        self.atol[:2 * u.nz] *= self.tol_scale
+        self.atol[u.lam.start:] *= self.tol_scale
         #: factor on the multipliers' absolute tolerances, from the forces at the start
         #: (set by the first segment)
         self.lambda_scale = 1.0
@@ -261,12 +275,13 @@ class IdaIntegrator(Integrator):
         # IDA checks the roots after every successful step (at the step's end, or at the
         # output time when the step passed it): count steps here.
         if t >= self.t_last and t not in self.outputs:
-            if t > self.t_last:
-                self.t_last, self.in_place = t, 0
+            if t - self.t_last > self.crawl_step:
+                self.in_place = 0
             else:  # a step too short to move t: IDA halving next to a singular position
                 self.in_place += 1
                 if self.in_place > IN_PLACE_STEPS:
                     raise _CrawlError
+            self.t_last = t
             self.n_steps += 1
             if self.n_steps > self.step_budget:
                 raise _StalledError
@@ -349,8 +364,7 @@ class IdaIntegrator(Integrator):
         self._lambda_atol()
 
     def _lambda_atol(self) -> None:
-        nz, m = self.u.nz, self.u.m
-        self.atol[2 * nz:2 * nz + m] = lambda_atol(self.relaxed, self.lambda_scale)
+        self.atol[self.u.lam] = lambda_atol(self.relaxed, self.lambda_scale) * self.tol_scale
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
         model, opts, hs, u = self.model, self.opts, self.hs, self.u
@@ -378,7 +392,7 @@ class IdaIntegrator(Integrator):
         q, v = project_state(model, q, v, t0, self.p)
         a, lam, _ = model.kkt(q, v, t0, self.p)
         self.ratio0 = singular_ratio(model, q, t0, self.p)
-        y0, yp0 = u.start(q, v, a, lam)
+        y0, yp0 = u.start(q, v, a, lam, t0, model.fill(self.p, t0, q, v))
         self._roundoff_atol(y0)
         ne = 1 + len(self.triggers)
         # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
@@ -386,6 +400,7 @@ class IdaIntegrator(Integrator):
         # took a million such steps in place (A02 at rtol 1e-10). With this floor it fails
         # there, and the failure is handled as any other.
         self.min_step = 0.25 * np.finfo(float).eps * abs(t0)
+        self.crawl_step = CRAWL_STEP * np.finfo(float).eps * max(abs(t0), opts.t_end)
         if first_step:
             first_step = max(first_step, 2.0 * self.min_step)
 
@@ -443,10 +458,10 @@ class IdaIntegrator(Integrator):
                 resfn, jacfn=jacfn, eventsfn=eventsfn, num_events=ne,
                 # IDA's limit per call: what is left of the run's budget, which the root
                 # function counts across calls and ends cleanly ("stalled")
-                rtol=opts.rtol, atol=self.atol, max_num_steps=max(1, self.step_budget + 1),
+                rtol=self.rtol, atol=self.atol, max_num_steps=max(1, self.step_budget + 1),
                 first_step=first_step, min_step=self.min_step,
                 max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
-                algebraic_idx=list(range(2 * u.nz, u.N)),
+                algebraic_idx=list(range(u.lam.start, u.N)),
                 **self.ls_options)
         t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
         outs = _output_times(opts, t0)
@@ -513,7 +528,10 @@ class IdaIntegrator(Integrator):
         # (A02 at rtol 1e-10: three samples at one time before each crossing): the last
         keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
         Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
-        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current())
+        # each sample's works since the sample before it (zero at the segment's start)
+        W = u.works(Y[keep])
+        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current(),
+                      work=np.diff(W, axis=0, prepend=np.zeros((1, W.shape[1]))))
         t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
         if self.error is not None:
             e = self.error
@@ -573,7 +591,7 @@ class IdaIntegrator(Integrator):
         new = np.empty_like(cur)
         for blk in (slice(0, nz), slice(nz, 2 * nz)):
             floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
-            new[blk] = np.maximum(self.opts.atol, floor)
+            new[blk] = np.maximum(self.opts.atol, floor) * self.tol_scale
         raised = bool(np.any(new > OUTGROWN * cur))
         if not check:
             self.atol[:2 * nz] = new
@@ -583,7 +601,7 @@ class IdaIntegrator(Integrator):
         """A first step (s) whose order-1 local error in the coordinates, h^2 / 2 |z''|
         in IDA's weighted norm, is the tolerance: z'' is known at a consistent start."""
         nz = self.u.nz
-        wt = 1.0 / (self.opts.rtol * np.abs(y0[:nz]) + self.atol[:nz])
+        wt = self.tol_scale / (self.rtol * np.abs(y0[:nz]) + self.atol[:nz])
         norm = float(np.sqrt(np.mean((yp0[nz:2 * nz] * wt) ** 2))) if nz else 0.0
         return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0
 
@@ -593,7 +611,7 @@ class IdaIntegrator(Integrator):
         (compiled) as the Python path; the step budget and Ctrl-C act between chunks."""
         fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
                                      self.has_push)
-        r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.opts.rtol, first_step,
+        r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress)
         self.n_steps = r.steps
@@ -626,6 +644,6 @@ class IdaIntegrator(Integrator):
             what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
                     "tolerances may be too tight or the forces too stiff)")
             status = Status.INTEGRATOR
-        ida = (f"{IN_PLACE_STEPS} steps too short to move t" if self.crawled
+        ida = (f"{IN_PLACE_STEPS} steps too short to move t (a crawl)" if self.crawled
                else f"{r.message} (status {r.status})")
         return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio

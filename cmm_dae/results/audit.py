@@ -1,5 +1,10 @@
 """The energy audit of a Result: work in (drivers, loads) against the change of kinetic and
-potential energy and everything lost (dampers, impacts, friction), sample by sample."""
+potential energy and everything lost (dampers, impacts, friction), sample by sample.
+
+The works and losses are the integrator's own quadratures where it computed them (IDA
+integrates them with the motion: the audit then holds to the solver's tolerance on any
+output grid); elsewhere (the fixed-step method, the windows of singular-position
+crossings, result files from before) they are integrated over the samples."""
 
 from __future__ import annotations
 
@@ -42,6 +47,26 @@ def _cumulative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
         base = out[b - 1]
     return out
 
+
+def _integrated(t: np.ndarray, powers: list[np.ndarray], steps: np.ndarray | None
+                ) -> list[np.ndarray]:
+    """Cumulative works of the sampled ``powers`` (W): each sample's step from the
+    integrator's quadratures ``steps`` (n, len(powers)) where finite, else over the
+    samples (:func:`_cumulative`)."""
+    out = []
+    for k, P in enumerate(powers):
+        over = _cumulative(t, P)
+        if steps is None or steps.shape != (t.size, len(powers)) or t.size == 0:
+            out.append(over)
+            continue
+        inc = np.diff(over, prepend=0.0)
+        own = steps[:, k]
+        inc = np.where(np.isfinite(own), own, inc)
+        inc[0] = 0.0
+        out.append(np.cumsum(inc))
+    return out
+
+
 def energy_audit(res: Any) -> Energy:
     """Energy audit along the run (J): kinetic, potential (gravity), spring energy of
     the joint springs, energy of the force elements (spring and preload), cumulative
@@ -49,8 +74,11 @@ def energy_audit(res: Any) -> Energy:
     impact losses, and the balance residual
     ``work - (dT + dV_g + dV_s + dV_e + dissipation + impact losses)``.
 
-    Integrals use Simpson's rule between event samples (the integrands jump there), so
-    the residual measures both the solver and the output spacing.
+    The works and losses are IDA's quadratures, integrated with the motion, so the
+    residual measures the solver alone; where the integrator did not integrate them (the
+    fixed-step method, crossings of singular positions) Simpson's rule over the samples
+    between events (the integrands jump there) takes over, and the residual measures the
+    output spacing too.
     """
     d, m = res.data, res.meta
     mass = np.asarray(m["masses"])
@@ -73,13 +101,12 @@ def energy_audit(res: Any) -> Energy:
     P_drv = np.zeros(res.t.size)
     for name in m["drivers"]:
         P_drv = P_drv + res.driver(name).effort * res.joint(name).velocity
-    work = _cumulative(res.t, P_drv)
-    lw = _cumulative(res.t, np.sum(d["load_power"], axis=1)) if "load_power" in d \
-        else np.zeros(res.t.size)
-    diss = _cumulative(res.t, P_diss)
+    P_ld = np.sum(d["load_power"], axis=1) if "load_power" in d else np.zeros(res.t.size)
     P_fr = -np.sum(d["friction"] * d["cd"], axis=1) if "friction" in d \
         else np.zeros(res.t.size)
-    fr_loss = _cumulative(res.t, P_fr)
+    # (the order of equations.unknowns.WORKS)
+    work, lw, diss, fr_loss = _integrated(res.t, [P_drv, P_ld, P_diss, P_fr],
+                                          d.get("work_step"))
     lost = np.zeros(res.t.size)
     after = d.get("event_sample", np.zeros(0, int))
     seen: dict[float, int] = {}

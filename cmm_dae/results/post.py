@@ -164,14 +164,17 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  config: np.ndarray, configurations: list[Configuration],
                  params: list[np.ndarray], events: list[Event], stats: Stats,
                  status: Status = Status.SUCCESS, message: str = "success",
-                 event_sample: np.ndarray | None = None) -> Result:
+                 event_sample: np.ndarray | None = None,
+                 work: np.ndarray | None = None) -> Result:
     """Post-process sampled states into a :class:`Result`.
 
     Parameters
     ----------
     t : (n,) s; q, v : (n, nq) centroid coordinates and rates; config : (n,) indices into
     ``configurations``; params : the parameter vector of each configuration;
-    event_sample : (n_events,) index of the sample holding the state right after each event.
+    event_sample : (n_events,) index of the sample holding the state right after each event;
+    work : (n, 4) each sample's works (J) since the sample before it as the integrator
+    integrated them (drivers, loads, dampers, kinetic friction; NaN where it did not).
     """
     mech = model.mech
     n = t.size
@@ -237,7 +240,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
             **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
                                    "load_power")},
             "event_sample": (np.asarray(event_sample, int) if event_sample is not None
-                             else np.zeros(0, int))}
+                             else np.zeros(0, int)),
+            "work_step": (np.asarray(work, float).reshape(n, -1) if work is not None
+                          else np.full((n, 4), np.nan))}
     meta = {
         "mechanism": mech.name,
         "source": mech.source,

@@ -238,10 +238,20 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 seg.relaxed = bool(getattr(integ, "relaxed", False))
                 seg.lambda_scale = float(getattr(integ, "lambda_scale", 1.0))
                 trace.append(seg)
+            edges: set = set()
             for trig in end.triggers:
                 done = ev.handle(hs, trig, q, v, t, integ.policy)
                 if seg is not None:
                     seg.groups.append((trig, done, [hs.params[x.event.after] for x in done]))
+                q, v = _apply(done, t, q, v, events, rec, after, integ, opts)
+            # the events may leave a coordinate on a zone's edge, already moving across
+            # it (released from a stop there): decided now, as at the start
+            while end.triggers and (edge := [x for x in ev.zone_edges(hs, q, v)
+                                             if x not in edges]):
+                edges.add(edge[0])
+                done = ev.handle(hs, edge[0], q, v, t, integ.policy)
+                if seg is not None:
+                    seg.groups.append((edge[0], done, [hs.params[x.event.after] for x in done]))
                 q, v = _apply(done, t, q, v, events, rec, after, integ, opts)
             if end.reason == "singular":
                 n_events = len(events)
@@ -270,7 +280,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         message = (f"numerical failure after t = {rec.last_t:.9g} s (the last state kept): "
                    f"{type(e).__name__}: {e}")
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
-                       stats, status, message, np.array(after, int))
+                       stats, status, message, np.array(after, int), rec.works())
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
     # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
     res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if cls.method == "ida"
