@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 import cmm_dae as cd
 from cmm_dae.results.audit import _cumulative
@@ -153,3 +154,33 @@ def test_a_zone_edge_crossed_by_round_off_is_decided_before_integrating():
     done = ev.handle(hs, ev.zone_edges(hs, q, v)[0], q, v, 0.3, ev.Policy())
     assert [(d.event.kind, d.event.side) for d in done] == [("zone", "enter")]
     assert hs.zones == {"lift"}
+
+
+# ------------------------------------------------------------------ out of memory afterwards
+def test_out_of_memory_in_post_processing_keeps_the_states(monkeypatch, tmp_path):
+    """Running out of memory after the integration (post-processing a long run) lost the
+    whole run. The run now fails with a Result holding its sampled states, which save and
+    load back; the message says what happened and what to do."""
+    from cmm_dae.results import post
+
+    mech = cd.load(cd.example("pendulum_stop"))
+    ok = cd.run_dae(mech, 1.0)
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(post, "_series", no_memory)
+    try:
+        cd.run_dae(mech, 1.0)
+    except cd.SolverError as e:
+        res = e.result
+    else:
+        raise AssertionError("no error")
+    assert res.status is cd.Status.NUMERICAL
+    assert "out of memory while post-processing" in res.message and "output_dt" in res.message
+    assert np.array_equal(res.t, ok.t) and np.array_equal(res.data["q"], ok.data["q"])
+    assert [e.t for e in res.events] == [e.t for e in ok.events]
+    back = cd.load_result(res.save(tmp_path / "states.npz"))
+    assert np.array_equal(back.data["v"], ok.data["v"])
+    with pytest.raises(cd.CmmError, match="sampled states only"):
+        back.joint("O")

@@ -175,7 +175,34 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     event_sample : (n_events,) index of the sample holding the state right after each event;
     work : (n, 4) each sample's works (J) since the sample before it as the integrator
     integrated them (drivers, loads, dampers, kinetic friction; NaN where it did not).
+
+    Running out of memory here, after the run, keeps the run: the Result then holds the
+    sampled states alone (``t``, ``q``, ``v``, configurations, events, works), its status
+    ``numerical failure`` and its message says so (:meth:`Result.save` keeps them).
     """
+    n = t.size
+    work = (np.asarray(work, float).reshape(n, -1) if work is not None
+            else np.full((n, 4), np.nan))
+    event_sample = (np.asarray(event_sample, int) if event_sample is not None
+                    else np.zeros(0, int))
+    try:
+        data = _series(model, t, q, v, config, configurations, params)
+    except MemoryError as e:
+        data = {"t": t, "q": q, "v": v, "config": np.asarray(config, int)}
+        message = (f"out of memory while post-processing {n} samples ({type(e).__name__}"
+                   f"{': ' + str(e) if str(e) else ''}): the Result holds the sampled "
+                   "states only (t, q, v, events; res.save keeps them); run again with a "
+                   "coarser output_dt"
+                   + ("" if status == Status.SUCCESS else f" (the run: {message})"))
+        status = Status.NUMERICAL
+    data["event_sample"], data["work_step"] = event_sample, work
+    return Result(_meta(model), data, configurations, events, stats, status, message)
+
+
+def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: np.ndarray,
+            configurations: list[Configuration], params: list[np.ndarray]
+            ) -> dict[str, np.ndarray]:
+    """Every per-sample series of a Result (see :func:`build_result`)."""
     mech = model.mech
     n = t.size
     P = np.array([params[c] for c in config]).reshape(n, -1)
@@ -238,12 +265,14 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
             "effort": effort, "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
             "friction": friction,
             **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
-                                   "load_power")},
-            "event_sample": (np.asarray(event_sample, int) if event_sample is not None
-                             else np.zeros(0, int)),
-            "work_step": (np.asarray(work, float).reshape(n, -1) if work is not None
-                          else np.full((n, 4), np.nan))}
-    meta = {
+                                   "load_power")}}
+    return data
+
+
+def _meta(model: Model) -> dict:
+    """What a Result keeps of the mechanism (names, masses, geometry for drawings)."""
+    mech = model.mech
+    return {
         "mechanism": mech.name,
         "source": mech.source,
         "bodies": model.body_names,
@@ -275,4 +304,3 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         "limits": {n: [j.limits.lower, j.limits.upper] for n, j in mech.joints.items()
                    if j.limits is not None},
     }
-    return Result(meta, data, configurations, events, stats, status, message)

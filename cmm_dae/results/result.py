@@ -73,6 +73,18 @@ class BodySeries:
     acceleration: np.ndarray
 
 
+class _Series(dict):
+    """A Result's series by name; a series it does not hold is a clear error (the states
+    alone, kept when post-processing ran out of memory, have no forces or joint series)."""
+
+    def __missing__(self, key: str) -> np.ndarray:
+        if "lam" not in self:
+            raise CmmError(f"this Result holds the sampled states only (t, q, v: "
+                           f"post-processing ran out of memory), not '{key}'; run again with "
+                           "a coarser output_dt")
+        raise KeyError(key)
+
+
 class Result:
     """Output of :func:`cmm_dae.run_dae` or :func:`cmm_dae.run_iterative`.
 
@@ -96,7 +108,7 @@ class Result:
                  configurations: list[Configuration], events: list[Event], stats: Stats,
                  status: Status | str = Status.SUCCESS, message: str = "success"):
         self.meta = meta
-        self.data = data
+        self.data = _Series(data)
         self.configurations = configurations
         self.events = events
         self.stats = stats

@@ -49,7 +49,9 @@ def load_result(path: str | Path) -> Result:
             message, status = status, Status.INTEGRATOR
         res = Result(meta, data, configs, events, stats, status, message)
         n = res.t.size
-        for k in ("q", "v", "c", "config"):
+        # ("c" is missing only from the states a run kept when post-processing ran out
+        # of memory)
+        for k in ("q", "v", "config") + (("c",) if "lam" in data else ()):
             if data[k].shape[0] != n:
                 raise ValueError(f"array '{k}' has {data[k].shape[0]} rows for {n} times")
         return res

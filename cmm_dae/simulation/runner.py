@@ -291,6 +291,10 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                              if hasattr(integ, "sparse") else None)
     res.meta["compiled"] = getattr(integ, "c", None) is not None
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
+    if "lam" not in res.data and res.t.size:  # post-processing ran out of memory: the
+        # states are kept (build_result), the run fails with them
+        status, message = res.status, res.message
+        err = err if err is not None else MemoryError(message)
     if err is not None and throw:
         raise SolverError(message, status=status, result=res,
                           configuration=hs.configurations[hs.current()],
