@@ -86,6 +86,30 @@ def non_finite(m: Any) -> list[Problem]:
     return out
 
 
+
+def _friction_problems(t: str, j) -> list[Problem]:
+    """A joint's friction table: static >= kinetic >= 0, mu_static >= mu_kinetic >= 0,
+    and a pin radius exactly where a revolute joint's levels grow with its reaction."""
+    f, out = j.friction, []
+    fs, fk = f.static, f.kinetic
+    if not (_finite(fs) and _finite(fk) and fs >= fk >= 0):
+        out.append(Problem(t, "friction", f"expected static >= kinetic >= 0 "
+                           f"({'N' if j.type == 'prismatic' else 'N m'}), got "
+                           f"static = {fs}, kinetic = {fk}"))
+    ms, mk = f.mu_static, f.mu_kinetic
+    if not (_finite(ms) and _finite(mk) and ms >= mk >= 0):
+        out.append(Problem(t, "friction", f"expected mu_static >= mu_kinetic >= 0, got "
+                           f"mu_static = {ms}, mu_kinetic = {mk}"))
+    elif j.type == "revolute" and f.from_reaction and not (_finite(f.radius)
+                                                            and f.radius > 0):
+        out.append(Problem(t, "friction.radius", "expected the pin radius > 0 (m): a "
+                           "revolute joint's friction from its reaction is mu radius |F|, "
+                           f"got radius = {f.radius}"))
+    if j.type == "prismatic" and f.radius != 0.0:
+        out.append(Problem(t, "friction.radius", "a prismatic joint's friction from its "
+                           "reaction is mu |N|: it has no radius"))
+    return out
+
 def validate(m: Any) -> list[Problem]:
     """All semantic problems of a mechanism (empty list when it is sound): the checks of
     each table, and every non-finite number (:func:`non_finite`) they did not report."""
@@ -145,11 +169,7 @@ def validate(m: Any) -> list[Problem]:
             out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
                                f"got {j.damper.damping}"))
         if j.friction is not None:
-            fs, fk = j.friction.static, j.friction.kinetic
-            if not (_finite(fs) and _finite(fk) and fs >= fk >= 0):
-                out.append(Problem(t, "friction", f"expected static >= kinetic >= 0 "
-                                   f"({'N' if j.type == 'prismatic' else 'N m'}), got "
-                                   f"static = {fs}, kinetic = {fk}"))
+            out += _friction_problems(t, j)
     for name in m.bodies:
         if name not in used_bodies:
             out.append(Problem(f"bodies.{name}", "", "is connected by no joint"))

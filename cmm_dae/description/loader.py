@@ -314,8 +314,10 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     if "friction" in d:
         ft = r.keys(f"{t}.friction", r.sub(t, d, "friction"),
                     keys_of("joints", "friction"))
-        friction = Friction(r.num(f"{t}.friction", ft, "static"),
-                            r.num(f"{t}.friction", ft, "kinetic"))
+        friction = Friction(*(r.num(f"{t}.friction", ft, k,
+                                    default("joints", k, "friction"))
+                              for k in ("static", "kinetic", "mu_static", "mu_kinetic",
+                                        "radius")))
     return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper,
                  friction)
 

@@ -120,12 +120,26 @@ class _TwoPoints:
 
 @dataclass(frozen=True)
 class Friction:
-    """Dry friction in a joint: it sticks while the force it must carry stays within
-    ``static`` and slides against ``kinetic`` (N for a prismatic joint, N m for a revolute
-    one; static >= kinetic >= 0)."""
+    """Dry friction in a joint: it sticks while the force it must carry stays within its
+    static level and slides against its kinetic level.
 
-    static: float
-    kinetic: float
+    Each level is a constant (``static``, ``kinetic``: N for a prismatic joint, N m for a
+    revolute one) plus a part proportional to the joint's reaction (``mu_static``,
+    ``mu_kinetic``, dimensionless): ``mu * radius * |F|`` on a revolute joint (F its
+    reaction force, ``radius`` the pin's radius in m), ``mu * |N|`` on a prismatic joint (N
+    the guide's normal reaction). The reaction and the friction it causes are solved
+    together. static >= kinetic >= 0, mu_static >= mu_kinetic >= 0."""
+
+    static: float = 0.0
+    kinetic: float = 0.0
+    mu_static: float = 0.0
+    mu_kinetic: float = 0.0
+    radius: float = 0.0
+
+    @property
+    def from_reaction(self) -> bool:
+        """Whether the levels grow with the joint's reaction."""
+        return self.mu_static > 0.0 or self.mu_kinetic > 0.0
 
 
 @dataclass(frozen=True)

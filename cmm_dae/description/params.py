@@ -33,7 +33,8 @@ _TABLES = ("bodies", "joints", "drivers", "elements")
 _FIELDS = {
     "bodies": ("mass", "inertia"),
     "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
-               "limits.lower", "limits.upper", "friction.static", "friction.kinetic"),
+               "limits.lower", "limits.upper", "friction.static", "friction.kinetic",
+               "friction.mu_static", "friction.mu_kinetic", "friction.radius"),
     "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
     "elements": ("stiffness", "rest", "damping", "preload"),
 }
@@ -190,7 +191,8 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
 
     Paths: ``bodies.NAME.mass|inertia``, ``joints.NAME.restitution|angle``,
     ``joints.NAME.spring.stiffness|rest``, ``joints.NAME.damper.damping``,
-    ``joints.NAME.limits.lower|upper``, ``joints.NAME.friction.static|kinetic``,
+    ``joints.NAME.limits.lower|upper``,
+    ``joints.NAME.friction.static|kinetic|mu_static|mu_kinetic|radius``,
     ``drivers.JOINT.speed|initial|amplitude|...``,
     ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
     ``initial.velocities.NAME``, ``gravity.x|y``, a load's law

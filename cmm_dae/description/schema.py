@@ -169,11 +169,24 @@ SPEC: dict[str, Table] = {
             "damping": Key("number", "damping", "N m s/rad or N s/m", minimum=0.0)},
             default=None),
         "friction": Key("table", "Coulomb friction: the joint sticks while the force it "
-                        "carries stays within `static`, slips with `kinetic` against its rate",
-                        keys={"static": Key("number", "static friction level", "N m or N",
-                                            minimum=0.0),
-                              "kinetic": Key("number", "kinetic friction level (<= static)",
-                                             "N m or N", minimum=0.0)},
+                        "carries stays within its static level, slips with its kinetic level "
+                        "against its rate; each level is a constant plus `mu` times the "
+                        "joint's reaction (revolute: `mu radius |F|`; prismatic: `mu |N|`, "
+                        "N the guide's normal reaction), solved together with it",
+                        keys={"static": Key("number", "constant static friction level",
+                                            "N m or N", minimum=0.0, default=0.0),
+                              "kinetic": Key("number", "constant kinetic friction level "
+                                             "(<= static)", "N m or N", minimum=0.0,
+                                             default=0.0),
+                              "mu_static": Key("number", "static friction coefficient on "
+                                               "the reaction", "-", minimum=0.0,
+                                               default=0.0),
+                              "mu_kinetic": Key("number", "kinetic friction coefficient on "
+                                                "the reaction (<= mu_static)", "-",
+                                                minimum=0.0, default=0.0),
+                              "radius": Key("number", "pin radius of a revolute joint with "
+                                            "mu_static or mu_kinetic", "m", minimum=0.0,
+                                            default=0.0)},
                         default=None),
     }, named=True, example='[joints.E]\ntype = "prismatic"\nconnects = ["ground.rail", '
        '"slider.C"]\naxis = [1.0, 0.0]\nlimits = { lower = 0.15, upper = 0.30 }\n'

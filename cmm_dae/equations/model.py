@@ -34,8 +34,10 @@ from scipy.sparse.linalg import splu
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND, Mechanism
 from ..description.params import param_value, symbolic
+from . import reaction
 from .codegen import Buffered, compile_functions
 from .laws import driver_expr, law_expr
+from .reaction import magnitude, reacting
 from .unknowns import Unknowns, ground_pins
 
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
@@ -169,6 +171,8 @@ class Model:
         self.locks = mech.lockable_joints
         #: joints with dry friction, in the order of their slip directions in ``p``
         self.frictional = mech.frictional_joints
+        #: frictional joints whose levels grow with their reaction (equations.reaction)
+        self.reacting = reacting(mech)
         nb = len(self.body_names)
         self.nq = nq = 3 * nb
         self.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
@@ -287,6 +291,23 @@ class Model:
         for f, name in enumerate(self.frictional):
             k = jidx[name]
             Qf -= c_q[k, :].T * (smech.joints[name].friction.kinetic * p[2 * nl + nz + f])
+        # Kinetic friction from the reaction (equations.reaction): a function of the
+        # multipliers, so it is kept apart from Qf; IDA's residual has it with its own
+        # multipliers, the KKT solves add it by Newton's method.
+        lam = ca.SX.sym("lam", m)
+        Qr = ca.SX.zeros(nq)
+        for f, name in enumerate(self.frictional):
+            if name not in self.reacting:
+                continue
+            if len(self.rows_of("joint", name)) != 2:
+                raise ModelError(Problem(
+                    f"joints.{name}", "friction", "grows with the joint's reaction, but "
+                    "its constraint rows are redundant and leave the reaction undetermined; "
+                    "use constant friction levels (static, kinetic) there"))
+            fr, k = smech.joints[name].friction, jidx[name]
+            arm = fr.radius if mech.joints[name].type == "revolute" else 1.0
+            Qr -= c_q[k, :].T * (fr.mu_kinetic * arm * magnitude(self, name, lam)
+                                 * p[2 * nl + nz + f])
 
         # Applied loads: a law times a joint direction, a point force or a body moment.
         self.load_names = list(mech.loads)
@@ -352,7 +373,6 @@ class Model:
             mass_sx += [b.mass, b.mass, b.inertia]
         Mdiag = ca.vertcat(*mass_sx)
         # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
-        lam = ca.SX.sym("lam", m)
         mu = ca.SX.sym("mu", m)
         y = ca.vertcat(q, v, lam, mu)
         yp = ca.SX.sym("yp", y.numel())
@@ -378,8 +398,12 @@ class Model:
             diss += el.damping * rate**2
         fr = ca.SX(0)
         for f, name in enumerate(self.frictional):
-            fr += (smech.joints[name].friction.kinetic * p[2 * nl + nz + f]
-                   * cdot[jidx[name]])
+            kin = smech.joints[name].friction.kinetic
+            if name in self.reacting:
+                fj = smech.joints[name].friction
+                kin = kin + fj.mu_kinetic * (fj.radius if mech.joints[name].type ==
+                                             "revolute" else 1.0) * magnitude(self, name, lam)
+            fr += kin * p[2 * nl + nz + f] * cdot[jidx[name]]
         powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
                             diss, fr)
         #: the symbolic equations with the parameters theta free (sensitivities)
@@ -388,11 +412,11 @@ class Model:
                     "Qf": Qf, "c": c, "cdot": cdot, "c_q": c_q, "cddot": cddot, "free": free,
                     "mass": Mdiag,
                     "P": P, "y": y, "yp": yp, "lam": lam,
-                    "F": ggl(Phi_q, Qf, phi, h, Mdiag)}
+                    "Qr": Qr, "F": ggl(Phi_q, Qf + Qr, phi, h, Mdiag)}
         if self.theta_paths:  # the numeric functions below hold the parameters' values
-            (phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, powers,
+            (phi, Phi_q, Phi_t, h, gamma, Qf, Qr, c, cdot, c_q, cddot, P, Mdiag, powers,
              *ex) = ca.substitute(
-                [phi, Phi_q, Phi_t, h, gamma, Qf, c, cdot, c_q, cddot, P, Mdiag, powers,
+                [phi, Phi_q, Phi_t, h, gamma, Qf, Qr, c, cdot, c_q, cddot, P, Mdiag, powers,
                  *el_len, *el_rate, *el_ten, *load_val, *load_pow], [self.theta],
                 [ca.DM(self.theta0)])
             ne, nld = len(el_len), len(load_val)
@@ -422,6 +446,9 @@ class Model:
         #: the powers (W) of the drivers, the loads, the dampers (dissipated) and kinetic
         #: friction (lost) at (q, v, lambda, t, p), which IDA integrates with the motion
         self.power_fn = ca.Function("powers", [q, v, lam, t, p], [dn(powers)])
+        #: the kinetic friction from the reaction as generalized forces (nq,) at
+        #: (q, v, lambda, t, p): what Qf leaves out
+        self.qr_fn = ca.Function("qr", [q, v, lam, t, p], [dn(Qr)])
         #: which of those powers the mechanism has at all (not identically zero)
         self.powered = tuple(k for k in range(powers.numel()) if not powers[k].is_zero())
         self.free_fn = ca.Function("free", [p], [dn(free)])
@@ -450,7 +477,7 @@ class Model:
         self._maps: dict[tuple[str, int], Buffered] = {}
 
         cj = ca.SX.sym("cj")
-        F = ggl(Phi_q, Qf, phi, h, Mdiag)
+        F = ggl(Phi_q, Qf + Qr, phi, h, Mdiag)
         J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
         self.N = int(y.numel())
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
@@ -469,7 +496,7 @@ class Model:
         # given as Python callables, whose solver Jacobian terms are in centroid
         # coordinates)
         pins = {b: j for b, j in ground_pins(mech).items()
-                if pinned_angles and not self.callables
+                if pinned_angles and not self.callables and j not in self.reacting
                 and sum(r == Row("joint", j) for r in self.rows) == 2}
         #: what IDA integrates (:class:`~cmm_dae.equations.unknowns.Unknowns`)
         self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)
@@ -602,7 +629,10 @@ class Model:
         """
         p = self.fill(p, t, q, v)
         Phi_q, Qf, gamma = self._kkt_parts(q, v, t, p)
-        return self.kkt_from(Phi_q, Qf, gamma, p)
+        a, lam, Phi_q = self.kkt_from(Phi_q, Qf, gamma, p)
+        if self.reacting:  # friction from the reaction: solved with it (Newton)
+            a, lam = reaction.solve(self, q, v, p, Phi_q, Qf, gamma, a, lam)
+        return a, lam, Phi_q
 
     def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -164,13 +164,20 @@ class Unknowns:
         vz = T @ w
         fn = ca.Function("centroid_parts", [q, v, t, p], [phi, Qf, free])
         phi_f, Q_f, free_f = fn(qz, vz, t, p)
+        lam = ca.SX.sym("lam", m)
+        mu = ca.SX.sym("mu", m)
+        # every model row's multiplier from IDA's: a constant selection matrix (zero rows
+        # for the eliminated joints), built once for every symbolic() call
+        self._select = ca.DM(model.m, m)
+        for k, i in enumerate(self.rows.tolist()):
+            self._select[i, k] = 1.0
+        if model.reacting:  # friction from the reaction: with IDA's own multipliers
+            Q_f = Q_f + model.qr_fn(qz, vz, ca.mtimes(self._select, lam), t, p)
         idx = self.rows.tolist()
         phi_r = phi_f[idx] if m else ca.SX(0, 1)
         free_r = free_f[idx] if m else ca.SX(0, 1)
         Gz = ca.jacobian(phi_r, z)
         h_r = Gz @ w + ca.jacobian(phi_r, t)
-        lam = ca.SX.sym("lam", m)
-        mu = ca.SX.sym("mu", m)
         y = ca.vertcat(z, w, lam, mu)
         yp = ca.SX.sym("yp", 2 * nz + 2 * m)
         zp, wp = yp[:nz], yp[nz:2 * nz]
@@ -184,11 +191,6 @@ class Unknowns:
             ca.substitute(qz, z, yz[:nz]),
             ca.substitute(vz, ca.vertcat(z, w), yz)))])
         self._maps: dict[int, ca.Function] = {}
-        # every model row's multiplier from IDA's: a constant selection matrix (zero rows
-        # for the eliminated joints), built once for every symbolic() call
-        self._select = ca.DM(model.m, m)
-        for k, i in enumerate(self.rows.tolist()):
-            self._select[i, k] = 1.0
         return (ca.Function("core_res", [t, y, yp, p], [F]),
                 ca.Function("core_jac", [t, y, yp, cj, p], [J]))
 

@@ -81,7 +81,7 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     _, lam, _ = model.kkt(q, v0, t, p)
     force = hs.push(lam, joint, trial)
     hs.slip = slip
-    if abs(force) <= hs.static(joint):
+    if abs(force) <= hs.static(joint, lam):
         hs.locked = trial
         lost = float(0.5 * np.sum(model.mass * (v**2 - v0**2)))
         return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side="stick",

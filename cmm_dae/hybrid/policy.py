@@ -96,7 +96,7 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
         elif tr.kind == "rate":  # positive while it slips on in its direction
             out[i] = hs.slip.get(tr.joint, 0) * cdot[jidx[tr.joint]]
         elif tr.kind == "slip":  # positive while the stuck joint carries less than Fs
-            out[i] = hs.static(tr.joint) - abs(hs.push(lam, tr.joint))
+            out[i] = hs.static(tr.joint, lam) - abs(hs.push(lam, tr.joint))
         elif tr.kind == "gap":
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
@@ -105,7 +105,7 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
             else:
                 out[i] = where(cdot[k] < 0.0, 1.0, L - c[k])
         else:  # friction holds a joint on its stop until the pull beats it
-            out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint)
+            out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint, lam)
 
 
 def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,

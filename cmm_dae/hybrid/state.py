@@ -17,7 +17,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Configuration, Event
-from ..equations import rank
+from ..equations import rank, reaction
 from ..equations.model import Model
 
 #: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
@@ -199,10 +199,15 @@ class HybridState:
         k = self.model.n_fixed + self.model.locks.index(joint)
         return lam[k] if side == "upper" else -lam[k]  # "stick": the lock's force along +c
 
-    def static(self, joint: str) -> float:
-        """Static friction limit of a joint (0 without friction), N or N m."""
+    def static(self, joint: str, lam: Any = None) -> Any:
+        """Static friction limit of a joint (0 without friction), N or N m; with friction
+        from the reaction, at the multipliers ``lam`` (numbers or CasADi symbols)."""
         f = self.model.mech.joints[joint].friction
-        return f.static if f is not None else 0.0
+        if f is None:
+            return 0.0
+        if f.from_reaction and lam is not None:
+            return reaction.level(self.model, joint, lam, "static")
+        return f.static
 
     def lock_force(self, q: np.ndarray, v: np.ndarray, t: float, joint: str,
                    locked: Locked | None = None) -> float:

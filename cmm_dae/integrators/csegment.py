@@ -254,11 +254,14 @@ _warned = False
 def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
     """The compiled segment of ``model`` (built on first use, kept with the model), or None
     with a warning (once per process) when it cannot be used: no working C compiler, no
-    SUNDIALS libraries from scikit-sundae, or load laws given as Python callables."""
+    SUNDIALS libraries from scikit-sundae, load laws given as Python callables, or
+    friction from the reaction (its event functions solve a nonlinear KKT system)."""
     global _models, _warned
     why = available()
     if why is None and model.callables:
         why = "load laws given as Python callables run in Python"
+    if why is None and model.reacting:
+        why = "friction from the reaction is solved in Python"
     if why is not None:
         if not _warned:
             warnings.warn(f"compiled segment not used ({why}): running the Python path",

@@ -331,7 +331,10 @@ class IdaIntegrator(Integrator):
         model = self.model
         p = model.fill(self.p, t, q, v)
         c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
-        _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
+        if model.reacting:  # friction from the reaction: the KKT system is nonlinear
+            _, lam, _ = model.kkt(q, v, t, p)
+        else:
+            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
         ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
 
     # ------------------------------------------------------------------ segment

@@ -249,9 +249,10 @@ class IterativeIntegrator(Integrator):
 
 
     def _compiled_step(self) -> _CompiledStep | None:
-        """The configuration's compiled step (cached), None with Python load laws."""
+        """The configuration's compiled step (cached), None with Python load laws or
+        friction from the reaction (the Python step's KKT solves include it)."""
         model, hs = self.model, self.hs
-        if model.callables:
+        if model.callables or model.reacting:
             return None
         triggers = self.triggers = ev.event_list(model, hs.locked)
         key = (tuple(self.coords), tuple(triggers), hs.mode())

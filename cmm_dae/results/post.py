@@ -13,6 +13,7 @@ from ..core.errors import Status
 from ..description.mechanism import GROUND
 from ..equations import kkt as schur
 from ..equations.model import Model
+from ..equations.reaction import level
 from .result import Configuration, Event, Result, Stats
 
 
@@ -25,7 +26,20 @@ def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.n
     """Accelerations (n, nq), multipliers (n, m) and Phi_q (n, m, nq) at every sample.
 
     ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
+    Friction from the reaction (``model.reacting``) is solved with it sample by sample
+    (:func:`cmm_dae.equations.reaction.solve`) where a reacting joint slips.
     """
+    a, lam, Phi_q = _linear_kkt(model, t, q, v, P)
+    if model.reacting:
+        slots = [model.slip_slot(j) for j in model.reacting]
+        for i in np.flatnonzero(np.any(P[:, slots] != 0.0, axis=1)):
+            a[i], lam[i], _ = model.kkt(q[i], v[i], float(t[i]), P[i])
+    return a, lam, Phi_q
+
+
+def _linear_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`batch_kkt` without friction from the reaction."""
     n, nq, m = t.size, model.nq, model.m
     Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
     Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
@@ -203,7 +217,6 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
             configurations: list[Configuration], params: list[np.ndarray]
             ) -> dict[str, np.ndarray]:
     """Every per-sample series of a Result (see :func:`build_result`)."""
-    mech = model.mech
     n = t.size
     P = np.array([params[c] for c in config]).reshape(n, -1)
     if model.callables:  # the callable loads' values at each sample
@@ -243,9 +256,12 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
     # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
     # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
     friction = np.zeros((n, nj))
+    # the multipliers of the rows in the equations (lam holds every row's once redundant
+    # ones are shared out): the reactions friction grows with
+    kept = lam[:, [i for i in range(len(model.all_rows)) if i not in model.dropped]].T
     for name in model.frictional:
         k = model.joint_names.index(name)
-        fk = mech.joints[name].friction.kinetic
+        fk = level(model, name, kept, "kinetic") if n else 0.0
         s = P[:, model.slip_slot(name)] if n else np.zeros(0)
         row = model.n_base + model.locks.index(name)
         lock = -lam[:, row] if n else np.zeros(0)  # the lock row's force along +c

@@ -173,7 +173,8 @@ class _SymbolicState(HybridState):
         lim = self.model.smech.joints[joint].limits
         return lim.lower if side == "lower" else lim.upper
 
-    def static(self, joint: str):
+    def static(self, joint: str, lam=None):
+        # (friction from the reaction is refused before a sensitivity run is set up)
         f = self.model.smech.joints[joint].friction
         return f.static if f is not None else 0.0
 

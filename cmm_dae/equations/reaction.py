@@ -1,0 +1,125 @@
+"""Friction from the reaction: a joint's friction levels grow with the load it carries.
+
+On a revolute joint the level is ``mu * radius * |F|`` (F the pin's reaction force), on a
+prismatic joint ``mu * |N|`` (N the guide's normal reaction), each added to the joint's
+constant level. The reaction is a combination of the joint's multipliers: a revolute
+joint's two rows hold its two points together in global x and y, so their multipliers
+are the force itself; a prismatic joint's second row holds the point on the guide's
+normal, so its multiplier is the normal force. The friction a slipping joint feels
+therefore depends on the multipliers it helps determine, and the KKT system becomes
+nonlinear: :func:`solve` corrects a linear solve by Newton's method, so that the reaction
+and the friction it causes are solved together, never with a lagged reaction.
+
+Written once for numbers and CasADi expressions (:func:`magnitude`, :func:`level`), as the
+event functions are.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SMOOTH", "level", "magnitude", "reacting", "solve"]
+
+#: A reaction's magnitude is sqrt(F . F + SMOOTH^2) (N): its derivative, which IDA's and
+#: Newton's Jacobians need, stays defined where the reaction passes zero; the level it
+#: adds there, mu r SMOOTH, is below any tolerance.
+SMOOTH = 1e-10
+_NEWTON_TOL = 1e-14
+_NEWTON_MAX = 30
+
+
+def reacting(mech: Any) -> list[str]:
+    """Joints whose friction levels grow with their reaction, in file order."""
+    return [n for n, j in mech.joints.items()
+            if j.friction is not None and j.friction.from_reaction]
+
+
+def _rows(model: Any, joint: str) -> list[int]:
+    rows = model.rows_of("joint", joint)
+    if len(rows) != 2:  # (the model refuses this when it is built)
+        raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not 2")
+    return rows
+
+
+def magnitude(model: Any, joint: str, lam: Any) -> Any:
+    """|F| (revolute) or |N| (prismatic) of ``joint`` from the model's multipliers (N)."""
+    r = _rows(model, joint)
+    if model.mech.joints[joint].type == "revolute":
+        return (lam[r[0]] * lam[r[0]] + lam[r[1]] * lam[r[1]] + SMOOTH**2) ** 0.5
+    return (lam[r[1]] * lam[r[1]] + SMOOTH**2) ** 0.5
+
+
+def level(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> Any:
+    """The ``kind`` ("static" or "kinetic") friction level of ``joint`` (N or N m) with the
+    multipliers ``lam``: the constant level plus mu times the reaction (times the pin's
+    radius on a revolute joint). ``friction`` (default the joint's) may hold symbols."""
+    j = model.mech.joints[joint]
+    f = j.friction if friction is None else friction
+    const = f.static if kind == "static" else f.kinetic
+    mu = f.mu_static if kind == "static" else f.mu_kinetic
+    if not j.friction.from_reaction:
+        return const
+    arm = f.radius if j.type == "revolute" else 1.0
+    return const + mu * arm * magnitude(model, joint, lam)
+
+
+def _gradient(model: Any, joint: str, lam: np.ndarray) -> np.ndarray:
+    """d magnitude / d lambda (m,)."""
+    r = _rows(model, joint)
+    g = np.zeros(lam.size)
+    mag = magnitude(model, joint, lam)
+    if model.mech.joints[joint].type == "revolute":
+        g[r[0]], g[r[1]] = lam[r[0]] / mag, lam[r[1]] / mag
+    else:
+        g[r[1]] = lam[r[1]] / mag
+    return g
+
+
+def solve(model: Any, q: np.ndarray, v: np.ndarray, p: np.ndarray, Phi_q: np.ndarray,
+          Qf: np.ndarray, gamma: np.ndarray, a: np.ndarray, lam: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Accelerations and multipliers with the kinetic friction of the slipping reacting
+    joints taken from the multipliers themselves.
+
+    ``Qf`` holds every applied force but that friction; ``a``, ``lam`` the solution without
+    it (the start of Newton's iteration). Each slipping joint adds
+    ``-c_q^T s mu_k arm |F(lambda)|`` to the forces (s its slip direction in ``p``), which
+    makes the system ``[[M, Phi_q^T], [Phi_q, D]] [a; lambda] = [Qf + Q_r(lambda); gamma]``
+    nonlinear; Newton's method on it converges in a few iterations (quadratically).
+    """
+    slipping = []
+    c_q = None
+    for name in model.reacting:
+        s = p[model.slip_slot(name)]
+        f = model.mech.joints[name].friction
+        if s != 0.0 and f.mu_kinetic > 0.0:
+            if c_q is None:
+                c_q = model.joint_coords(q, v).c_q
+            arm = f.radius if model.mech.joints[name].type == "revolute" else 1.0
+            slipping.append((name, s * f.mu_kinetic * arm * c_q[model.jidx[name]]))
+    if not slipping:
+        return a, lam
+    nq = model.nq
+    A = model.kkt_matrix(Phi_q, p)
+    x = np.concatenate([a, lam])
+    for _ in range(_NEWTON_MAX):
+        a, lam = x[:nq], x[nq:]
+        Qr = np.zeros(nq)
+        dQ = np.zeros((nq, lam.size))
+        for name, g in slipping:
+            Qr -= g * magnitude(model, name, lam)
+            dQ -= np.outer(g, _gradient(model, name, lam))
+        res = A @ x - np.concatenate([Qf + Qr, gamma])
+        J = A.copy()
+        J[:nq, nq:] -= dQ
+        dx = np.linalg.solve(J, res)
+        x = x - dx
+        if np.max(np.abs(dx)) <= _NEWTON_TOL * (1.0 + np.max(np.abs(x))):
+            break
+    else:
+        raise np.linalg.LinAlgError("the friction from the reaction could not be solved "
+                                    "with the motion (Newton did not converge: the "
+                                    "friction would lock the joint against its own load)")
+    return x[:nq], x[nq:]
