@@ -226,6 +226,16 @@ def _bench(args: argparse.Namespace) -> int:
 
     if args.repeat < 1:
         raise CmmError(f"--repeat must be at least 1, not {args.repeat}")
+    if args.peers:
+        from .studies.peers import compare_a02, peers_table
+
+        if args.models or args.chain:
+            raise CmmError("--peers runs its own problem (A02 with --loops): give no "
+                           "models and no --chain with it")
+        if not args.loops or any(n < 1 for n in args.loops):
+            raise CmmError(f"--loops must be integers >= 1, not {args.loops}")
+        print(peers_table([compare_a02(n, repeat=args.repeat) for n in args.loops]))
+        return 0
     paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,
                              repeat=args.repeat, compiled=not args.no_compiled)))
@@ -443,6 +453,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="leave out the compiled segment (whose first build takes seconds)")
     bn.add_argument("--chain", action="store_true",
                     help="also time chains of 8, 16 and 32 four-bar loops (growth with size)")
+    bn.add_argument("--peers", action="store_true",
+                    help="time cmm_dae against MuJoCo (extra 'peers') at equal accuracy on "
+                         "IFToMM A02 chains of --loops four-bar loops, 2 s")
+    bn.add_argument("--loops", type=int, nargs="+", default=[1, 8, 32],
+                    help="with --peers: loop counts (1 8 32)")
     bn.set_defaults(func=_bench)
     return ap
 

@@ -1,0 +1,159 @@
+"""cmm_dae against the code a user would pick instead, at equal accuracy (``cmm-dae bench
+--peers``).
+
+The peer is MuJoCo (the optional extra ``peers``), tuned as its users tune it for a
+closed-loop linkage: the RK4 integrator at a fixed step h, the loops closed by soft
+equality constraints whose time constant is 2 h (the shortest MuJoCo advises), no contacts.
+The problem is IFToMM A02 with N four-bar loops (``cmm_dae.description.iftomm``), whose
+crank tip has an independent reference (the one-degree-of-freedom reduction, DOP853 at
+rtol 1e-13). Each code's error is the largest distance of the first crank's tip from that
+reference over the run.
+
+Equal accuracy: MuJoCo's error at its step sets the target; cmm_dae runs a ladder of
+tolerances and the cheapest one whose error is no larger is timed against MuJoCo, side by
+side in one process (best of ``repeat`` warm runs each, alternating). cmm_dae is timed as a
+user calls it: ``run_dae(mechanism)`` from the mechanism, the equations built each time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from ..core.errors import CmmError
+from ..description import iftomm
+from ..simulation.runner import run_dae
+
+__all__ = ["RTOLS", "a02_mujoco", "compare_a02", "mujoco_available", "peers_table"]
+
+#: The tolerances cmm_dae tries, loosest first (atol = 1e-2 rtol as in any run).
+RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+
+
+def _mujoco() -> Any:
+    try:
+        import mujoco
+    except ImportError as e:
+        raise CmmError("the peer comparison needs MuJoCo: pip install 'cmm_dae[peers]'"
+                       ) from e
+    return mujoco
+
+
+def mujoco_available() -> bool:
+    """Whether MuJoCo can be imported here."""
+    try:
+        _mujoco()
+    except CmmError:
+        return False
+    return True
+
+
+def _a02_xml(n: int, h: float) -> str:
+    """MJCF of A02 with ``n`` loops in MuJoCo's x-z plane (gravity along -z): each crank a
+    child of the world on a hinge about y, each coupler a child of the crank to its left,
+    its right end connected to the next crank's tip by a soft equality of time constant
+    2 h. Rods of 1 kg and 1 m along their body's x axis (inertia 1/12 kg m^2 about y)."""
+    inertial = ('<inertial pos="0.5 0 0" mass="1" '
+                f'diaginertia="1e-9 {iftomm.ROD_I!r} {iftomm.ROD_I!r}"/>')
+    down = f'quat="{math.cos(-math.pi / 4)!r} 0 {math.sin(-math.pi / 4)!r} 0"'  # x -> +z
+    back = f'quat="{math.cos(math.pi / 4)!r} 0 {math.sin(math.pi / 4)!r} 0"'    # z -> +x
+    bodies = []
+    for i in range(n + 1):
+        coupler = (f'<body name="coupler{i + 1}" pos="1 0 0" {back}>'
+                   f'<joint name="L{i + 1}" type="hinge" axis="0 1 0"/>{inertial}</body>'
+                   if i < n else "")
+        bodies.append(f'<body name="crank{i}" pos="{i} 0 0" {down}>'
+                      f'<joint name="G{i}" type="hinge" axis="0 1 0"/>{inertial}'
+                      f'<site name="tip{i}" pos="1 0 0"/>{coupler}</body>')
+    closures = "".join(f'<connect body1="coupler{i}" body2="crank{i}" anchor="1 0 0" '
+                       f'solref="{2 * h!r} 1"/>' for i in range(1, n + 1))
+    return (f'<mujoco><option timestep="{h!r}" integrator="RK4" gravity="0 0 -9.81"/>'
+            f'<worldbody>{"".join(bodies)}</worldbody><equality>{closures}</equality>'
+            '</mujoco>')
+
+
+def a02_mujoco(n: int, t_end: float, h: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
+    """A02 with ``n`` loops in MuJoCo for ``t_end`` s at step ``h``: the times (s) and the
+    first crank's tip (x, height) in m at every step."""
+    mujoco = _mujoco()
+    model = mujoco.MjModel.from_xml_string(_a02_xml(n, h))
+    data = mujoco.MjData(model)
+    for i in range(n + 1):  # the parallelogram turning at 1 rad/s: cranks +1 about y,
+        data.qvel[model.joint(f"G{i}").dofadr[0]] = 1.0  # couplers translating
+        if i:
+            data.qvel[model.joint(f"L{i}").dofadr[0]] = -1.0
+    mujoco.mj_forward(model, data)
+    steps = int(round(t_end / h))
+    tip = model.site("tip0").id
+    out = np.empty((steps + 1, 2))
+    out[0] = data.site_xpos[tip][[0, 2]]
+    for k in range(steps):
+        mujoco.mj_step(model, data)
+        out[k + 1] = data.site_xpos[tip][[0, 2]]
+    return h * np.arange(steps + 1), out
+
+
+def _error(t: np.ndarray, tip: np.ndarray, n: int) -> float:
+    return float(np.max(np.linalg.norm(tip - iftomm.a02_reference(n, t), axis=1)))
+
+
+def _best(fn, repeat: int) -> float:
+    fn()  # warm: imports, caches
+    best = math.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
+                rtols: tuple[float, ...] = RTOLS) -> dict:
+    """One row of the comparison on A02 with ``n`` loops.
+
+    Returns
+    -------
+    dict
+        ``loops``; MuJoCo's ``h`` (s), error (m) and best wall time (s); cmm_dae's chosen
+        ``rtol`` (None when no tolerance of ``rtols`` reached MuJoCo's error), its error
+        (m) and best wall time (s); ``ratio`` = cmm_dae's time over MuJoCo's (above 1:
+        MuJoCo is faster).
+    """
+    mech = iftomm.a02_four_bar(n)
+    t_mj, tip_mj = a02_mujoco(n, t_end, h)
+    err_mj = _error(t_mj, tip_mj, n)
+    chosen, err = None, math.inf
+    for rtol in rtols:
+        res = run_dae(mech, t_end, rtol=rtol, throw=False)
+        if not res.success:
+            continue
+        err = _error(res.t, iftomm.crank_tip(res), n)
+        if err <= err_mj:
+            chosen = rtol
+            break
+    row = {"loops": n, "h": h, "mujoco_error": err_mj, "rtol": chosen,
+           "cmm_dae_error": err if chosen is not None else math.nan}
+    # side by side: alternating best-of-repeat timings
+    row["mujoco_s"] = _best(lambda: a02_mujoco(n, t_end, h), repeat)
+    row["cmm_dae_s"] = (_best(lambda: run_dae(mech, t_end, rtol=chosen), repeat)
+                        if chosen is not None else math.nan)
+    row["ratio"] = row["cmm_dae_s"] / row["mujoco_s"]
+    return row
+
+
+def peers_table(rows: list[dict]) -> str:
+    """The comparison as text, one line per problem size."""
+    lines = ["A02 four-bar chain, 2 s, equal accuracy (largest crank-tip error against the "
+             "reference)",
+             f"{'loops':>5}  {'MuJoCo h':>8}  {'MuJoCo err':>10}  {'cmm_dae rtol':>12}  "
+             f"{'cmm_dae err':>11}  {'time ratio':>10}"]
+    for r in rows:
+        rtol = f"{r['rtol']:.0e}" if r["rtol"] is not None else "none"
+        lines.append(f"{r['loops']:>5}  {r['h']:>8.0e}  {r['mujoco_error']:>10.2e}  "
+                     f"{rtol:>12}  {r['cmm_dae_error']:>11.2e}  {r['ratio']:>10.2f}")
+    lines.append("time ratio: cmm_dae's wall time over MuJoCo's (RK4, loops closed by soft "
+                 "constraints of time constant 2 h), best of warm runs side by side")
+    return "\n".join(lines)

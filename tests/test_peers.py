@@ -1,0 +1,55 @@
+"""``cmm-dae bench --peers``: cmm_dae against MuJoCo at equal accuracy on IFToMM A02."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+from cmm_dae.cli import main
+from cmm_dae.description import iftomm
+from cmm_dae.studies import peers
+
+
+def test_mujoco_model_is_the_a02_mechanism():
+    """The MuJoCo model starts assembled on A02's parallelogram (the tip at (0, 1) m moving
+    at +1 m/s) and, with a tiny step, follows the reference closely (within 2e-4 m over
+    0.2 s at h 1e-4, where the soft loop closures are stiff): it is the same mechanism."""
+    t, tip = peers.a02_mujoco(2, 0.2, h=1e-4)
+    assert np.allclose(tip[0], [0.0, 1.0], atol=1e-12)
+    assert abs((tip[1, 0] - tip[0, 0]) / 1e-4 - 1.0) <= 1e-3
+    assert peers._error(t, tip, 2) <= 2e-4
+
+
+def test_compare_picks_the_cheapest_tolerance_reaching_mujocos_error():
+    """One row: MuJoCo's error at h 1e-2 sets the target; the chosen rtol is the loosest
+    of the ladder whose error is no larger, and the tolerance before it (if any) was
+    worse or failed; the ratio is cmm_dae's time over MuJoCo's."""
+    row = peers.compare_a02(1, t_end=0.5, repeat=1)
+    assert row["mujoco_error"] > 0 and row["rtol"] in peers.RTOLS
+    assert row["cmm_dae_error"] <= row["mujoco_error"]
+    k = peers.RTOLS.index(row["rtol"])
+    if k:
+        res = cd.run_dae(iftomm.a02_four_bar(1), 0.5, rtol=peers.RTOLS[k - 1], throw=False)
+        assert not res.success or peers._error(res.t, iftomm.crank_tip(res), 1) \
+            > row["mujoco_error"]
+    assert math.isclose(row["ratio"], row["cmm_dae_s"] / row["mujoco_s"])
+    assert "time ratio" in peers.peers_table([row])
+
+
+def test_cli_peers(capsys):
+    assert main(["bench", "--peers", "--loops", "1", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "A02 four-bar chain" in out and "MuJoCo" in out
+    assert main(["bench", "--peers", "--loops", "0"]) == 2
+    assert "--loops must be integers >= 1" in capsys.readouterr().err
+
+
+def test_without_mujoco_the_error_says_how_to_get_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import fails as if not installed
+    assert not peers.mujoco_available()
+    with pytest.raises(cd.CmmError, match=r"pip install 'cmm_dae\[peers\]'"):
+        peers.a02_mujoco(1, 0.1)
