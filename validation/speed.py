@@ -39,7 +39,7 @@ import memory  # noqa: E402
 
 import cmm_dae as cd  # noqa: E402
 from cmm_dae.description import iftomm  # noqa: E402
-from cmm_dae.equations.model import KKT_SPARSE_FROM  # noqa: E402
+from cmm_dae.equations.kkt import KKT_SPARSE_FROM  # noqa: E402
 from cmm_dae.studies.bench import chain_growth, chain_table  # noqa: E402
 
 #: profile entries (file fragment, function) -> part

@@ -101,24 +101,6 @@ def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: 
     return v - MinNorm(J, rcond).solve(J @ v + con.Phi_t[act])
 
 
-def impact_map(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
-               lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
-    """Post-impact velocities and impulses.
-
-    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
-    prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
-    Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
-    """
-    con = model.constraints(q, t, p)
-    b = -con.Phi_t  # drivers keep their velocity, locks keep 0
-    b[model.free_rows(p) != 0.0] = 0.0
-    if lock_row is not None:
-        b[lock_row] = target
-    A = model.kkt_matrix(con.Phi_q, p)
-    sol = np.linalg.solve(A, np.concatenate([model.mass * v, b]))
-    return sol[:model.nq], sol[model.nq:]
-
-
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     """Smallest over largest singular value of the active constraint rows at q (0 when
     they are dependent): :func:`dependent_rows`' measure alone, without the singular

@@ -1,23 +1,227 @@
-"""Multipliers of large mechanisms from a banded Schur complement, sample by sample.
+"""The KKT system of the equations of motion, in one place: ``[[M, Phi_q^T], [Phi_q, D]]
+[q''; lambda] = [Q; gamma]`` (M the diagonal mass matrix, D 1 on the inactive lock rows).
 
-With a diagonal mass matrix the KKT system reduces to ``S lam = Phi_q M^-1 Q - gamma`` with
-``S = Phi_q M^-1 Phi_q^T - D`` (m x m). For a large mechanism ``S`` is sparse with a fixed
-pattern (the union over configurations of its structural nonzeros); reordered by reverse
-Cuthill-McKee it is banded, so each sample costs one banded LU (LAPACK ``dgbsv``) instead
-of forming and factoring a dense m x m matrix. The values of ``S`` for all samples come from
-the products of the nonzeros of ``Phi_q`` that share a column, accumulated through one
-sparse matrix product.
+* :func:`blocks` builds it for CasADi symbols (compiled event functions, the fixed-step
+  algorithm's compiled step, sensitivities); :func:`matrix` for numbers.
+* :class:`Solver` solves one state (a model's :meth:`~cmm_dae.equations.model.Model.kkt`):
+  dense LAPACK with the configuration's constant blocks built once, or a sparse LU of
+  fixed pattern for large systems (:data:`KKT_SPARSE_FROM`).
+* :func:`batch` solves every sample of a run at once for post-processing: the Schur
+  complement ``S lam = Phi_q M^-1 Q - gamma``, ``S = Phi_q M^-1 Phi_q^T - D`` (m x m),
+  batched dense, or banded sample by sample for a large mechanism (:func:`structure`:
+  with a fixed pattern reordered by reverse Cuthill-McKee, each sample costs one banded
+  LU, LAPACK ``dgbsv``, its values accumulated through one sparse product); the whole
+  matrix where a sample's complement is singular.
+* :func:`impact_map` solves the same matrix for the velocities and impulses of an impact.
+
+Friction that grows with the reaction makes the system nonlinear: the solves here are
+corrected by :func:`cmm_dae.equations.reaction.solve`.
 """
 
 from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import Any
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg.lapack import dgbsv
+from scipy.linalg.lapack import dgbsv, dgesv
 from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.linalg import splu
+
+__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "batch", "blocks",
+           "impact_map", "matrix", "structure"]
+
+
+def blocks(mass, Phi_q, free):
+    """The KKT matrix ``[[M, Phi_q^T], [Phi_q, D]]`` for CasADi expressions (``mass`` the
+    diagonal of M, ``free`` that of D: 1 on inactive lock rows)."""
+    return ca.blockcat([[ca.diag(mass), Phi_q.T], [Phi_q, ca.diag(free)]])
+
+
+#: Size of the KKT matrix (coordinates plus constraint rows) from which :meth:`Solver.solve`
+#: factors it as a sparse matrix (SuperLU, partial pivoting as LAPACK's dense LU); below
+#: it, dense LAPACK. Set from validation/speed.py's KKT comparison (see its table).
+KKT_SPARSE_FROM = 160
+
+SINGULAR = "singular KKT matrix (a dead point or redundant constraints)"
+
+
+class SparseKKT:
+    """``[[M, Phi_q^T], [Phi_q, D]]`` as a CSC matrix of fixed pattern: the structural
+    nonzeros of Phi_q (CasADi's sparsity) and both diagonals, so that each solve only
+    gathers the values (no pattern search on the dense Jacobian). The whole KKT matrix,
+    not the Schur complement the outputs use (:func:`batch`): these single solves
+    serve the crossings of singular positions, where the complement's condition number is
+    the square of the constraint Jacobian's."""
+
+    def __init__(self, sparsity: ca.Sparsity, nq: int):
+        jr, jc = (np.asarray(x, dtype=np.int64) for x in sparsity.get_triplet())
+        m = sparsity.size1()
+        n = nq + m
+        self.jr, self.jc = jr, jc
+        d_m, d_f = np.arange(nq), nq + np.arange(m)
+        rows = np.concatenate([d_m, nq + jr, jc, d_f])
+        cols = np.concatenate([d_m, jc, nq + jr, d_f])
+        # where each (row, col) entry lands in CSC order: built once from its positions
+        order = sp.csc_matrix((np.arange(1, rows.size + 1, dtype=float), (rows, cols)),
+                               shape=(n, n))
+        order.sort_indices()
+        self.perm = order.data.astype(np.int64) - 1
+        self.indices, self.indptr, self.n = order.indices, order.indptr, n
+
+    def solve(self, mass: np.ndarray, Phi_q: np.ndarray, free: np.ndarray,
+              rhs: np.ndarray) -> np.ndarray:
+        vals = Phi_q[self.jr, self.jc]
+        data = np.concatenate([mass, vals, vals, free])[self.perm]
+        A = sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
+        try:
+            return splu(A, permc_spec="COLAMD").solve(rhs)
+        except RuntimeError as e:  # "Factor is exactly singular"
+            raise np.linalg.LinAlgError(SINGULAR) from e
+
+
+def matrix(mass: np.ndarray, Phi_q: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """The KKT matrix for numbers (dense)."""
+    nq, m = mass.size, free.size
+    A = np.zeros((nq + m, nq + m))
+    A[:nq, :nq] = np.diag(mass)
+    A[:nq, nq:] = Phi_q.T
+    A[nq:, :nq] = Phi_q
+    A[nq:, nq:] = np.diag(free)
+    return A
+
+
+class Solver:
+    """Single-state KKT solves of one model: dense LAPACK on a copy of the configuration's
+    constant blocks (M, D: built once per configuration), or, from
+    :data:`KKT_SPARSE_FROM` on, a sparse LU on Phi_q's fixed pattern."""
+
+    def __init__(self, model: Any, phi_q_sparsity: ca.Sparsity):
+        self.model = model
+        self.sparse = model.nq + model.m >= KKT_SPARSE_FROM
+        self._sparsity = phi_q_sparsity
+        self._sparse: SparseKKT | None = None
+        self._templates: dict[bytes, np.ndarray] = {}
+
+    def solve(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Accelerations and multipliers from the evaluated parts at parameters ``p``."""
+        model = self.model
+        nq = model.nq
+        rhs = np.concatenate([Qf, gamma])
+        if self.sparse:
+            if self._sparse is None:
+                self._sparse = SparseKKT(self._sparsity, nq)
+            sol = self._sparse.solve(model.mass, Phi_q, model.free_rows(p), rhs)
+            return sol[:nq], sol[nq:]
+        key = p[:model.n_switches].tobytes()  # the configuration, not callable loads
+        tpl = self._templates.get(key)
+        if tpl is None:
+            tpl = self._templates[key] = matrix(model.mass, np.zeros_like(Phi_q),
+                                                model.free_rows(p))
+        A = tpl.copy()
+        A[:nq, nq:] = Phi_q.T
+        A[nq:, :nq] = Phi_q
+        # LAPACK directly: half the overhead of numpy.linalg.solve on these small systems
+        _, _, sol, info = dgesv(A, rhs)
+        if info != 0:
+            raise np.linalg.LinAlgError(SINGULAR)
+        return sol[:nq], sol[nq:]
+
+
+def impact_map(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
+               lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
+    """Post-impact velocities and impulses.
+
+    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
+    prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
+    Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
+    """
+    con = model.constraints(q, t, p)
+    b = -con.Phi_t  # drivers keep their velocity, locks keep 0
+    b[model.free_rows(p) != 0.0] = 0.0
+    if lock_row is not None:
+        b[lock_row] = target
+    A = matrix(model.mass, con.Phi_q, model.free_rows(p))
+    sol = np.linalg.solve(A, np.concatenate([model.mass * v, b]))
+    return sol[:model.nq], sol[model.nq:]
+
+
+def batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Accelerations (n, nq), multipliers (n, m) and Phi_q (n, m, nq) at every sample.
+
+    ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
+    Friction from the reaction (``model.reacting``) is solved with it sample by sample
+    (:func:`cmm_dae.equations.reaction.solve`) where a reacting joint slips.
+    """
+    a, lam, Phi_q = _linear_batch(model, t, q, v, P)
+    if model.reacting:
+        slots = [model.slip_slot(j) for j in model.reacting]
+        for i in np.flatnonzero(np.any(P[:, slots] != 0.0, axis=1)):
+            a[i], lam[i], _ = model.kkt(q[i], v[i], float(t[i]), P[i])
+    return a, lam, Phi_q
+
+
+def _linear_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`batch` without friction from the reaction."""
+    n, nq, m = t.size, model.nq, model.m
+    Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
+    Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
+    # a mapped output is (rows, n); with n = 1 it comes back 1-D: reshape, not transpose
+    Qf = np.asarray(Qf).reshape(-1, n).T
+    gamma = np.asarray(gamma).reshape(-1, n).T
+    free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n).T
+    if m == 0:  # no constraint at all (a free body): M a = Q
+        return Qf / model.mass, np.zeros((n, 0)), Phi_q
+    if np.all(model.mass > 0.0):
+        # The Schur complement on the diagonal mass matrix: a = M^-1 (Q - Phi_q^T lam) with
+        # (Phi_q M^-1 Phi_q^T - D) lam = Phi_q M^-1 Q - gamma, m x m instead of (nq + m)^2
+        # (about 3x faster on the double-folded mechanism); an inactive lock row (zero in
+        # Phi_q) reads -lam = 0. Point masses (zero inertia) need the whole KKT matrix.
+        lam = _schur_multipliers(model, Phi_q, Qf, gamma, free)
+        if lam is not None:
+            return (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass, lam, Phi_q
+        # a singular sample: the whole matrix, sample by sample, below
+    A = np.zeros((n, nq + m, nq + m))
+    d = np.arange(nq + m)
+    A[:, d[:nq], d[:nq]] = model.mass
+    A[:, :nq, nq:] = Phi_q.transpose(0, 2, 1)
+    A[:, nq:, :nq] = Phi_q
+    A[:, d[nq:], d[nq:]] = free
+    rhs = np.concatenate([Qf, gamma], axis=1)
+    try:
+        sol = np.linalg.solve(A, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a singular sample (the state a run failed at): the
+        sol = np.array([np.linalg.lstsq(Ai, bi, rcond=None)[0]  # rest still count
+                        for Ai, bi in zip(A, rhs, strict=True)])
+    return sol[:, :nq], sol[:, nq:], Phi_q
+
+
+def _schur_multipliers(model: Any, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray,
+                       free: np.ndarray) -> np.ndarray | None:
+    """Multipliers (n, m) from the Schur complement: banded sample by sample for a large
+    mechanism, else dense and batched; None when a sample's complement is singular."""
+    st = for_model(model)
+    if st is not None:
+        try:
+            return banded_solve(st, Phi_q, model.mass, Qf, gamma, free)
+        except np.linalg.LinAlgError:
+            pass  # the dense one, then the whole matrix
+    PM = Phi_q / model.mass
+    S = PM @ Phi_q.transpose(0, 2, 1)
+    d = np.arange(model.m)
+    S[:, d, d] -= free
+    rhs = np.einsum("nrk,nk->nr", PM, Qf) - gamma
+    try:
+        return np.linalg.solve(S, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return None
+
 
 #: The banded path is taken from this many constraint rows on, when the band is narrow
 #: (at most BAND_SHARE of m after reordering); smaller systems are solved dense and batched.
@@ -74,7 +278,7 @@ def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
     return BandedSchur(rows, cols, to_band, pa, pb, cols[pa], 2 * bw * m + d, perm, bw, m)
 
 
-def solve(st: BandedSchur, Phi_q: np.ndarray, mass: np.ndarray, Qf: np.ndarray,
+def banded_solve(st: BandedSchur, Phi_q: np.ndarray, mass: np.ndarray, Qf: np.ndarray,
           gamma: np.ndarray, free: np.ndarray) -> np.ndarray:
     """Multipliers (n, m) of every sample from Phi_q (n, m, nq), Q (n, nq), gamma (n, m)
     and the inactive-row flags ``free`` (n, m). Raises numpy.linalg.LinAlgError on a

@@ -27,68 +27,17 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sps
-from scipy.linalg.lapack import dgesv
-from scipy.sparse.linalg import splu
 
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND, Mechanism
 from ..description.params import param_value, symbolic
-from . import reaction
+from . import kkt, reaction
 from .codegen import Buffered, compile_functions
 from .laws import driver_expr, law_expr
 from .reaction import magnitude, reacting
 from .unknowns import Unknowns, ground_pins
 
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
-
-
-def kkt_blocks(mass, Phi_q, free):
-    """The KKT matrix ``[[M, Phi_q^T], [Phi_q, D]]`` for CasADi expressions (``mass`` the
-    diagonal of M, ``free`` that of D: 1 on inactive lock rows)."""
-    return ca.blockcat([[ca.diag(mass), Phi_q.T], [Phi_q, ca.diag(free)]])
-
-
-#: Size of the KKT matrix (coordinates plus constraint rows) from which :meth:`Model.kkt`
-#: factors it as a sparse matrix (SuperLU, partial pivoting as LAPACK's dense LU); below
-#: it, dense LAPACK. Set from validation/speed.py's KKT comparison (see its table).
-KKT_SPARSE_FROM = 160
-
-_SINGULAR_KKT = "singular KKT matrix (a dead point or redundant constraints)"
-
-
-class _SparseKKT:
-    """``[[M, Phi_q^T], [Phi_q, D]]`` as a CSC matrix of fixed pattern: the structural
-    nonzeros of Phi_q (CasADi's sparsity) and both diagonals, so that each solve only
-    gathers the values (no pattern search on the dense Jacobian). The whole KKT matrix,
-    not the Schur complement the outputs use (:mod:`cmm_dae.equations.kkt`): these single solves
-    serve the crossings of singular positions, where the complement's condition number is
-    the square of the constraint Jacobian's."""
-
-    def __init__(self, sparsity: ca.Sparsity, nq: int):
-        jr, jc = (np.asarray(x, dtype=np.int64) for x in sparsity.get_triplet())
-        m = sparsity.size1()
-        n = nq + m
-        self.jr, self.jc = jr, jc
-        d_m, d_f = np.arange(nq), nq + np.arange(m)
-        rows = np.concatenate([d_m, nq + jr, jc, d_f])
-        cols = np.concatenate([d_m, jc, nq + jr, d_f])
-        # where each (row, col) entry lands in CSC order: built once from its positions
-        order = sps.csc_matrix((np.arange(1, rows.size + 1, dtype=float), (rows, cols)),
-                               shape=(n, n))
-        order.sort_indices()
-        self.perm = order.data.astype(np.int64) - 1
-        self.indices, self.indptr, self.n = order.indices, order.indptr, n
-
-    def solve(self, mass: np.ndarray, Phi_q: np.ndarray, free: np.ndarray,
-              rhs: np.ndarray) -> np.ndarray:
-        vals = Phi_q[self.jr, self.jc]
-        data = np.concatenate([mass, vals, vals, free])[self.perm]
-        A = sps.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
-        try:
-            return splu(A, permc_spec="COLAMD").solve(rhs)
-        except RuntimeError as e:  # "Factor is exactly singular"
-            raise np.linalg.LinAlgError(_SINGULAR_KKT) from e
 
 
 def _rot(th):
@@ -198,6 +147,8 @@ class Model:
         nu = len(self.callables)
         p = ca.SX.sym("p", 2 * nl + nz + nf + nu)
         self._u0 = 2 * nl + nz + nf
+        #: entries of ``p`` that make the configuration (the callable loads' values follow)
+        self.n_switches = self._u0
         #: length of a configuration's parameter vector (lock switches and values, zones,
         #: slip directions, callable load values)
         self.n_params = int(p.numel())
@@ -467,12 +418,10 @@ class Model:
         #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
         self.event_parts = Buffered(ca.Function(
             "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
-        self._kkt_templates: dict[bytes, np.ndarray] = {}
-        # the sparse KKT's pattern, built on its first use (small models never use it)
-        self._phi_q_sparsity = Phi_q.sparsity()
-        self._kkt_sparse: _SparseKKT | None = None
+        #: the single-state KKT solves (equations.kkt)
+        self._kkt = kkt.Solver(self, Phi_q.sparsity())
         #: whether :meth:`kkt` factors the KKT matrix as a sparse one
-        self.kkt_sparse = self.nq + self.m >= KKT_SPARSE_FROM
+        self.kkt_sparse = self._kkt.sparse
         self._active: dict[bytes, np.ndarray] = {}
         self._maps: dict[tuple[str, int], Buffered] = {}
 
@@ -636,37 +585,17 @@ class Model:
 
     def kkt_from(self, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray, p: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The KKT solve of :meth:`kkt` from its already evaluated parts."""
-        rhs = np.concatenate([Qf, gamma])
-        if self.kkt_sparse:
-            if self._kkt_sparse is None:
-                self._kkt_sparse = _SparseKKT(self._phi_q_sparsity, self.nq)
-            sol = self._kkt_sparse.solve(self.mass, Phi_q, self.free_rows(p), rhs)
-            return sol[:self.nq], sol[self.nq:], Phi_q
-        key = p[:self._u0].tobytes()  # the configuration, not the callable loads' values
-        tpl = self._kkt_templates.get(key)
-        if tpl is None:  # the constant blocks (M, D) of this configuration, built once
-            tpl = self._kkt_templates[key] = self.kkt_matrix(np.zeros_like(Phi_q), p)
-        A = tpl.copy()
-        A[:self.nq, self.nq:] = Phi_q.T
-        A[self.nq:, :self.nq] = Phi_q
-        # LAPACK directly: half the overhead of numpy.linalg.solve on these small systems
-        _, _, sol, info = dgesv(A, rhs)
-        if info != 0:
-            raise np.linalg.LinAlgError(_SINGULAR_KKT)
-        return sol[:self.nq], sol[self.nq:], Phi_q
+        """The linear KKT solve of :meth:`kkt` from its already evaluated parts
+        (:class:`cmm_dae.equations.kkt.Solver`)."""
+        a, lam = self._kkt.solve(Phi_q, Qf, gamma, p)
+        return a, lam, Phi_q
 
     def kkt_system(self, q, v, t, p) -> tuple[ca.MX | ca.SX, ca.MX | ca.SX]:
         """The KKT matrix and right-hand side of :meth:`kkt` for CasADi symbols (for the
         compiled event functions and iterative step)."""
         Phi_q, Qf, gamma = self.kkt_fn(q, v, t, p)
-        return kkt_blocks(ca.DM(self.mass), Phi_q, self.free_fn(p)), ca.vertcat(Qf, gamma)
+        return kkt.blocks(ca.DM(self.mass), Phi_q, self.free_fn(p)), ca.vertcat(Qf, gamma)
 
     def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:
-        nq, m = self.nq, self.m
-        A = np.zeros((nq + m, nq + m))
-        A[:nq, :nq] = np.diag(self.mass)
-        A[:nq, nq:] = Phi_q.T
-        A[nq:, :nq] = Phi_q
-        A[nq:, nq:] = np.diag(self.free_rows(p))
-        return A
+        """The numeric KKT matrix at Phi_q in configuration ``p``."""
+        return kkt.matrix(self.mass, Phi_q, self.free_rows(p))

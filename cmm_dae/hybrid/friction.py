@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.records import Event, EventKind
-from ..equations.kinematics import impact_map
+from ..equations.kkt import impact_map
 from .state import (
     HybridState,
     Transition,

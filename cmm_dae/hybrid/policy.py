@@ -21,11 +21,11 @@ import numpy as np
 from ..core.records import Event, EventKind
 from ..equations.kinematics import (
     dependent_rows,
-    impact_map,
     project_positions,
     project_velocities,
     row_names,
 )
+from ..equations.kkt import impact_map
 from ..equations.model import Model
 from .friction import slip_free, stick_or_slip
 from .state import (

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.errors import Status
 from ..description.mechanism import GROUND
-from ..equations import kkt as schur
+from ..equations.kkt import batch as batch_kkt
 from ..equations.model import Model
 from ..equations.reaction import level
 from .result import Configuration, Event, Result, Stats
@@ -19,79 +19,6 @@ from .result import Configuration, Event, Result, Stats
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def batch_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Accelerations (n, nq), multipliers (n, m) and Phi_q (n, m, nq) at every sample.
-
-    ``P`` holds the parameter vector of each sample's configuration, shape (n, 2 K).
-    Friction from the reaction (``model.reacting``) is solved with it sample by sample
-    (:func:`cmm_dae.equations.reaction.solve`) where a reacting joint slips.
-    """
-    a, lam, Phi_q = _linear_kkt(model, t, q, v, P)
-    if model.reacting:
-        slots = [model.slip_slot(j) for j in model.reacting]
-        for i in np.flatnonzero(np.any(P[:, slots] != 0.0, axis=1)):
-            a[i], lam[i], _ = model.kkt(q[i], v[i], float(t[i]), P[i])
-    return a, lam, Phi_q
-
-
-def _linear_kkt(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`batch_kkt` without friction from the reaction."""
-    n, nq, m = t.size, model.nq, model.m
-    Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
-    Phi_q = np.asarray(Phi_q).reshape(m, n, nq).transpose(1, 0, 2)
-    # a mapped output is (rows, n); with n = 1 it comes back 1-D: reshape, not transpose
-    Qf = np.asarray(Qf).reshape(-1, n).T
-    gamma = np.asarray(gamma).reshape(-1, n).T
-    free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n).T
-    if m == 0:  # no constraint at all (a free body): M a = Q
-        return Qf / model.mass, np.zeros((n, 0)), Phi_q
-    if np.all(model.mass > 0.0):
-        # The Schur complement on the diagonal mass matrix: a = M^-1 (Q - Phi_q^T lam) with
-        # (Phi_q M^-1 Phi_q^T - D) lam = Phi_q M^-1 Q - gamma, m x m instead of (nq + m)^2
-        # (about 3x faster on the double-folded mechanism); an inactive lock row (zero in
-        # Phi_q) reads -lam = 0. Point masses (zero inertia) need the whole KKT matrix.
-        lam = _schur_multipliers(model, Phi_q, Qf, gamma, free)
-        if lam is not None:
-            return (Qf - np.einsum("nrk,nr->nk", Phi_q, lam)) / model.mass, lam, Phi_q
-        # a singular sample: the whole matrix, sample by sample, below
-    A = np.zeros((n, nq + m, nq + m))
-    d = np.arange(nq + m)
-    A[:, d[:nq], d[:nq]] = model.mass
-    A[:, :nq, nq:] = Phi_q.transpose(0, 2, 1)
-    A[:, nq:, :nq] = Phi_q
-    A[:, d[nq:], d[nq:]] = free
-    rhs = np.concatenate([Qf, gamma], axis=1)
-    try:
-        sol = np.linalg.solve(A, rhs[..., None])[..., 0]
-    except np.linalg.LinAlgError:  # a singular sample (the state a run failed at): the
-        sol = np.array([np.linalg.lstsq(Ai, bi, rcond=None)[0]  # rest still count
-                        for Ai, bi in zip(A, rhs, strict=True)])
-    return sol[:, :nq], sol[:, nq:], Phi_q
-
-
-def _schur_multipliers(model: Model, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray,
-                       free: np.ndarray) -> np.ndarray | None:
-    """Multipliers (n, m) from the Schur complement: banded sample by sample for a large
-    mechanism, else dense and batched; None when a sample's complement is singular."""
-    st = schur.for_model(model)
-    if st is not None:
-        try:
-            return schur.solve(st, Phi_q, model.mass, Qf, gamma, free)
-        except np.linalg.LinAlgError:
-            pass  # the dense one, then the whole matrix
-    PM = Phi_q / model.mass
-    S = PM @ Phi_q.transpose(0, 2, 1)
-    d = np.arange(model.m)
-    S[:, d, d] -= free
-    rhs = np.einsum("nrk,nk->nr", PM, Qf) - gamma
-    try:
-        return np.linalg.solve(S, rhs[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        return None
 
 
 def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,

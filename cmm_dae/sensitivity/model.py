@@ -11,7 +11,8 @@ import casadi as ca
 import numpy as np
 
 from ..description.mechanism import GROUND
-from ..equations.model import Buffered, Model, kkt_blocks
+from ..equations.kkt import blocks as kkt_blocks
+from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..hybrid.state import HybridState, SegmentTrace
 
