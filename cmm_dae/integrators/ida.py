@@ -212,13 +212,14 @@ class IdaIntegrator(Integrator):
             self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
                 (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
                 shape=(u.N, u.N))}
-        # The works (J) are out of the error test (ATOL_WORK). IDA's norm is a mean over
-        # all N unknowns, so nw more with zero error would loosen the test on the motion
-        # by sqrt(N / (N - nw)): every other tolerance is scaled by its inverse, and the
-        # test reads as it did without them.
+        # The works (J) are in the error test loosely (ATOL_WORK). IDA's norm is a mean
+        # over all N unknowns, so nw more with small errors would loosen the test on the
+        # motion by up to sqrt(N / (N - nw)): every other tolerance is scaled by its
+        # inverse, and the test on the motion reads as it did without them.
         self.tol_scale = math.sqrt((u.N - u.nw) / u.N) if u.N else 1.0
         self.rtol = opts.rtol * self.tol_scale
-        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol), np.full(u.nw, ATOL_WORK),
+        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol),
+                                    np.full(u.nw, ATOL_WORK * opts.atol),
                                     np.full(u.m, ATOL_LAMBDA), np.full(u.m, ATOL_MU)])
         self.atol[:2 * u.nz] *= self.tol_scale
         self.atol[u.lam.start:] *= self.tol_scale
@@ -529,7 +530,8 @@ class IdaIntegrator(Integrator):
             keep = keep[T[keep] <= self.t_error]
         # IDA's own steps (no output grid) end, at a failure, with its last time repeated
         # (A02 at rtol 1e-10: three samples at one time before each crossing): the last
-        keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
+        if keep.size:  # (a failure at the very start keeps nothing)
+            keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
         Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
         # each sample's works since the sample before it (zero at the segment's start)
         W = u.works(Y[keep])

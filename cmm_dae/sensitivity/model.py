@@ -11,6 +11,7 @@ import casadi as ca
 import numpy as np
 
 from ..description.mechanism import GROUND
+from ..equations import reaction
 from ..equations.kkt import blocks as kkt_blocks
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
@@ -55,9 +56,12 @@ class Equations:
         # --- KKT system K z = r, z = [a; lambda], and its derivatives
         z = ca.SX.sym("z", nq + m)
         K = kkt_blocks(sy["mass"], sy["Phi_q"], sy["free"])
-        R = K @ z - ca.vertcat(sy["Qf"], sy["gamma"])
+        # friction from the reaction: its forces are those of the multipliers z[nq:]
+        # (the system is nonlinear, dR/dz is K plus their derivative)
+        Qr = ca.substitute(sy["Qr"], sy["lam"], z[nq:])
+        R = K @ z - ca.vertcat(sy["Qf"] + Qr, sy["gamma"])
         dn = ca.densify
-        self.kkt = _Mat(ca.Function("skkt", [q, v, t, p, th, z], [dn(K)] + [
+        self.kkt = _Mat(ca.Function("skkt", [q, v, t, p, th, z], [dn(ca.jacobian(R, z))] + [
             dn(ca.jacobian(R, x)) for x in (q, v, t, p, th)]))
         # --- impact map: K [v+; Lambda] = [M v-; b], b the velocity targets
         vm = ca.SX.sym("vm", nq)
@@ -175,7 +179,10 @@ class _SymbolicState(HybridState):
         return lim.lower if side == "lower" else lim.upper
 
     def static(self, joint: str, lam=None):
-        # (friction from the reaction is refused before a sensitivity run is set up)
         f = self.model.smech.joints[joint].friction
-        return f.static if f is not None else 0.0
+        if f is None:
+            return 0.0
+        if lam is not None and self.model.mech.joints[joint].friction.from_reaction:
+            return reaction.level(self.model, joint, lam, "static", friction=f)
+        return f.static
 

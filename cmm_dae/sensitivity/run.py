@@ -176,10 +176,7 @@ def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
 def _unsupported(mech: Mechanism, model: Model) -> str | None:
     if model.callables:
         return "load laws given as Python callables (CasADi cannot differentiate them)"
-    if model.reacting:
-        return (f"friction from the reaction (joint {', '.join(model.reacting)}): its "
-                "nonlinear KKT system is not yet differentiated; constant friction levels "
-                "are")
+
     return None
 
 
@@ -220,8 +217,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     ------
     ModelError
         A path that is not a numeric parameter of the mechanism or has no effect (named),
-        or a mechanism the sensitivities are not defined for (callable load laws,
-        friction from the reaction).
+        or a mechanism the sensitivities are not defined for (callable load laws).
         With redundant constraints the joint forces and torques are minimum-norm
         reactions: their derivatives are NaN (said in ``notes``).
     CmmError
