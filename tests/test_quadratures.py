@@ -34,7 +34,7 @@ def test_driver_work_and_damper_loss_on_a_coarse_grid_against_the_closed_form():
     energy is constant, so the driver's work is M g L sin(W t) + C W^2 t and the damper's
     loss C W^2 t. Integrated over 9 samples (output_dt 0.25 s) the work was off by 0.057 J
     (Simpson's rule over the samples); the works IDA integrates with the motion are within
-    2e-8 J of the closed form on that grid (measured 6.8e-9 of 5.9 J at rtol 1e-10) and
+    3e-8 J of the closed form on that grid (measured 1.6e-8 of 5.9 J at rtol 1e-10) and
     the same at output_dt 1e-3 to 1e-9 J."""
     mech = _driven_rod()
     coarse = cd.run_dae(mech, 2.0, output_dt=0.25, rtol=1e-10)
@@ -42,9 +42,9 @@ def test_driver_work_and_damper_loss_on_a_coarse_grid_against_the_closed_form():
     for res in (coarse, fine):
         e = res.energy()
         ref = M * G * L * np.sin(W * res.t) + C * W**2 * res.t
-        assert np.max(np.abs(e.driver_work - ref)) <= 2e-8
+        assert np.max(np.abs(e.driver_work - ref)) <= 3e-8
         assert np.max(np.abs(e.damper_dissipation - C * W**2 * res.t)) <= 1e-12
-        assert np.max(np.abs(e.residual)) <= 2e-8
+        assert np.max(np.abs(e.residual)) <= 3e-8
     assert abs(coarse.energy().driver_work[-1] - fine.energy().driver_work[-1]) <= 1e-9
     # what the samples alone give on the coarse grid (the audit before)
     P = coarse.driver("O").effort * coarse.joint("O").velocity
