@@ -209,7 +209,6 @@ def test_sparse_screen_matches_the_dense_one():
     """The stepped-over screen of a large mechanism takes log det(J J^T) from Phi_q's
     nonzeros (sparse LU per sample): the same numbers as the dense path (measured 7e-14 on
     a chain of 32 loops), and the start's assembly is computed once per model."""
-    from cmm_dae.description.library import four_bar_chain
     from cmm_dae.simulation import passage
 
     mech = four_bar_chain(32)
@@ -228,3 +227,29 @@ def test_sparse_screen_matches_the_dense_one():
     again = cd.run_dae(mech, 0.5, model=model)
     assert len(model._start_cache) == cached  # nothing assembled anew
     assert np.array_equal(again.data["q"], res.data["q"])
+
+
+def test_a_mechanism_run_again_reuses_its_model():
+    """run_dae(mech) without model= keeps the model of the mechanisms it ran last: the same
+    object run again reuses it (and gives the same numbers); another object, of the same
+    content or with a parameter changed, gets its own."""
+    from cmm_dae.simulation import cache
+
+    cache.clear()
+    mech = four_bar_chain(2)
+    built = []
+    build = cd.Model
+    a = cd.run_dae(mech, 0.05)
+    first = cache.model_of(mech, lambda m: built.append(m) or build(m))
+    assert built == []  # kept from the run
+    b = cd.run_dae(mech, 0.05)
+    assert cache.model_of(mech, lambda m: built.append(m) or build(m)) is first
+    assert built == [] and np.array_equal(a.data["q"], b.data["q"])
+    other = four_bar_chain(2)  # equal content, another object
+    assert cache.model_of(other, lambda m: built.append(m) or build(m)) is not first
+    heavier = cd.with_params(mech, {"bodies.r0.mass": 2.0})
+    assert cache.model_of(heavier, lambda m: built.append(m) or build(m)) is not first
+    assert len(built) == 2
+    for _ in range(cache.MODELS_KEPT + 1):  # the least recently run goes first
+        cd.run_dae(four_bar_chain(1), 0.01)
+    assert len(cache._models) == cache.MODELS_KEPT

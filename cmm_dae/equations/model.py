@@ -424,6 +424,7 @@ class Model:
         self.kkt_sparse = self._kkt.sparse
         self._active: dict[bytes, np.ndarray] = {}
         self._maps: dict[tuple[str, int], Buffered] = {}
+        self._all_rows_index: dict[tuple[str, str], list[int]] | None = None
 
         cj = ca.SX.sym("cj")
         F = ggl(Phi_q, Qf + Qr, phi, h, Mdiag)
@@ -519,6 +520,17 @@ class Model:
     def rows_of(self, kind: str, name: str) -> list[int]:
         """Indices of the rows of one joint, driver or lock."""
         return [i for i, r in enumerate(self.rows) if r.kind == kind and r.name == name]
+
+    def all_rows_of(self, kind: str, name: str) -> list[int]:
+        """Indices in :attr:`all_rows` (the dropped redundant rows included) of the rows of
+        one joint, driver or lock (a table built once: post-processing asks for every
+        joint of every chunk)."""
+        if self._all_rows_index is None:
+            index: dict[tuple[str, str], list[int]] = {}
+            for i, r in enumerate(self.all_rows):
+                index.setdefault((r.kind, r.name), []).append(i)
+            self._all_rows_index = index
+        return list(self._all_rows_index.get((kind, name), ()))
 
     def mapped(self, name: str, n: int) -> Buffered:
         """``getattr(self, name)`` mapped over n samples, evaluated through the buffer API

@@ -42,7 +42,7 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
 def _rows_of(model: Model, kind: str, name: str) -> list[int]:
     """Indices in ``model.all_rows`` (the dropped redundant rows included: the
     post-processed multipliers cover them) of one joint's, driver's or lock's rows."""
-    return [i for i, r in enumerate(model.all_rows) if r.kind == kind and r.name == name]
+    return model.all_rows_of(kind, name)
 
 
 #: most samples post-processed at a time (bounds the memory of the per-sample matrices)

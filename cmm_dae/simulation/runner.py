@@ -32,6 +32,7 @@ from ..integrators.ida import IdaIntegrator
 from ..integrators.iterative import IterativeIntegrator
 from ..results.post import build_result
 from ..results.result import Result
+from .cache import model_of
 from .crossing import cross_singular, log_stepped_over
 from .options import IDA_DEFAULTS, ITERATIVE_DEFAULTS, branch_rule, check_options
 from .passage import passage_cut, watch_segment
@@ -167,11 +168,9 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     if any(not p.startswith("initial.") for p in eq_values):
         model = None  # the solved parameters are compiled into the model: build it anew
     try:
-        model = model if model is not None else Model(mech)
-        if not model.dropped and model.m > 0:
-            drop = redundant_base_rows(model)
-            if drop:  # a redundant constraint set: equations without the dependent rows
-                model = Model(mech, drop=drop)
+        model = model if model is not None else model_of(mech, _build)
+        if not model.dropped and model.m > 0:  # (a model given by the caller)
+            model = _without_redundant(model)
         build = time.perf_counter() - wall0
         hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
         q, v, events = start_state(model, hs)
@@ -318,6 +317,19 @@ def _apply(done: list, t: float, q: np.ndarray, v: np.ndarray, events: list, rec
                               f"(last: {e.kind} of joint {e.joint})", status=Status.MAX_EVENTS)
     integ.after_events(done)
     return q, v
+
+
+def _without_redundant(model: Model) -> Model:
+    """The model itself, or, for a redundant constraint set, the equations without the
+    dependent rows."""
+    drop = redundant_base_rows(model)
+    return Model(model.mech, drop=drop) if drop else model
+
+
+def _build(mech: Mechanism) -> Model:
+    """A new model of ``mech`` (redundant rows left out), as a run uses it."""
+    model = Model(mech)
+    return _without_redundant(model) if model.m > 0 else model
 
 
 def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:
