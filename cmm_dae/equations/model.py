@@ -34,7 +34,7 @@ from ..description.params import param_value, symbolic
 from . import kkt, reaction
 from .codegen import Buffered, compile_functions
 from .laws import driver_expr, law_expr
-from .reaction import magnitude, reacting
+from .reaction import reacting
 from .unknowns import Unknowns, ground_pins
 
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
@@ -255,10 +255,8 @@ class Model:
                     f"joints.{name}", "friction", "grows with the joint's reaction, but "
                     "its constraint rows are redundant and leave the reaction undetermined; "
                     "use constant friction levels (static, kinetic) there"))
-            fr, k = smech.joints[name].friction, jidx[name]
-            arm = fr.radius if mech.joints[name].type == "revolute" else 1.0
-            Qr -= c_q[k, :].T * (fr.mu_kinetic * arm * magnitude(self, name, lam)
-                                 * p[2 * nl + nz + f])
+            grows = reaction.growth(self, name, lam, "kinetic", smech.joints[name].friction)
+            Qr -= c_q[jidx[name], :].T * (grows * p[2 * nl + nz + f])
 
         # Applied loads: a law times a joint direction, a point force or a body moment.
         self.load_names = list(mech.loads)
@@ -349,11 +347,7 @@ class Model:
             diss += el.damping * rate**2
         fr = ca.SX(0)
         for f, name in enumerate(self.frictional):
-            kin = smech.joints[name].friction.kinetic
-            if name in self.reacting:
-                fj = smech.joints[name].friction
-                kin = kin + fj.mu_kinetic * (fj.radius if mech.joints[name].type ==
-                                             "revolute" else 1.0) * magnitude(self, name, lam)
+            kin = reaction.level(self, name, lam, "kinetic", smech.joints[name].friction)
             fr += kin * p[2 * nl + nz + f] * cdot[jidx[name]]
         powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
                             diss, fr)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SMOOTH", "level", "magnitude", "reacting", "solve"]
+__all__ = ["SMOOTH", "arm", "growth", "level", "magnitude", "reacting", "solve"]
 
 #: A reaction's magnitude is sqrt(F . F + SMOOTH^2) (N): its derivative, which IDA's and
 #: Newton's Jacobians need, stays defined where the reaction passes zero; the level it
@@ -51,18 +51,33 @@ def magnitude(model: Any, joint: str, lam: Any) -> Any:
     return (lam[r[1]] * lam[r[1]] + SMOOTH**2) ** 0.5
 
 
+def arm(model: Any, joint: str, friction: Any = None) -> Any:
+    """What mu multiplies besides the reaction: the pin's radius on a revolute joint (m),
+    1 on a prismatic one. ``friction`` (default the joint's) may hold symbols."""
+    f = model.mech.joints[joint].friction if friction is None else friction
+    return f.radius if model.mech.joints[joint].type == "revolute" else 1.0
+
+
+def growth(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> Any:
+    """The part of the ``kind`` ("static" or "kinetic") level of ``joint`` that grows with
+    the reaction, mu times the reaction's magnitude times :func:`arm` (N or N m; 0 for
+    constant friction). ``friction`` (default the joint's) may hold symbols."""
+    if not model.mech.joints[joint].friction.from_reaction:
+        return 0.0
+    f = model.mech.joints[joint].friction if friction is None else friction
+    mu = f.mu_static if kind == "static" else f.mu_kinetic
+    return mu * arm(model, joint, f) * magnitude(model, joint, lam)
+
+
 def level(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> Any:
     """The ``kind`` ("static" or "kinetic") friction level of ``joint`` (N or N m) with the
-    multipliers ``lam``: the constant level plus mu times the reaction (times the pin's
-    radius on a revolute joint). ``friction`` (default the joint's) may hold symbols."""
-    j = model.mech.joints[joint]
-    f = j.friction if friction is None else friction
+    multipliers ``lam``: the constant level plus :func:`growth`. ``friction`` (default the
+    joint's) may hold symbols."""
+    f = model.mech.joints[joint].friction if friction is None else friction
     const = f.static if kind == "static" else f.kinetic
-    mu = f.mu_static if kind == "static" else f.mu_kinetic
-    if not j.friction.from_reaction:
+    if not model.mech.joints[joint].friction.from_reaction:
         return const
-    arm = f.radius if j.type == "revolute" else 1.0
-    return const + mu * arm * magnitude(model, joint, lam)
+    return const + growth(model, joint, lam, kind, f)
 
 
 def _gradient(model: Any, joint: str, lam: np.ndarray) -> np.ndarray:
@@ -97,8 +112,8 @@ def solve(model: Any, q: np.ndarray, v: np.ndarray, p: np.ndarray, Phi_q: np.nda
         if s != 0.0 and f.mu_kinetic > 0.0:
             if c_q is None:
                 c_q = model.joint_coords(q, v).c_q
-            arm = f.radius if model.mech.joints[name].type == "revolute" else 1.0
-            slipping.append((name, s * f.mu_kinetic * arm * c_q[model.jidx[name]]))
+            slipping.append((name, s * f.mu_kinetic * arm(model, name)
+                             * c_q[model.jidx[name]]))
     if not slipping:
         return a, lam
     nq = model.nq

@@ -39,12 +39,6 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
             np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
 
 
-def _rows_of(model: Model, kind: str, name: str) -> list[int]:
-    """Indices in ``model.all_rows`` (the dropped redundant rows included: the
-    post-processed multipliers cover them) of one joint's, driver's or lock's rows."""
-    return model.all_rows_of(kind, name)
-
-
 #: most samples post-processed at a time (bounds the memory of the per-sample matrices)
 CHUNK = 2048
 #: bytes of Phi_q per chunk for a large model (its chunks are shorter)
@@ -82,7 +76,7 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     jforce = np.zeros((n, nj, 2))
     jtorque = np.zeros((n, nj))
     for k, (name, j) in enumerate(mech.joints.items()):
-        rows = _rows_of(model, "joint", name) + _rows_of(model, "lock", name)
+        rows = model.all_rows_of("joint", name) + model.all_rows_of("lock", name)
         G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
         ref = pts[:, k, :]
         if j.second_body != GROUND:
@@ -200,7 +194,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
         friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
     effort = np.zeros((n, len(model.driver_names)))
     for k, name in enumerate(model.driver_names):
-        effort[:, k] = -lam[:, _rows_of(model, "driver", name)[0]]
+        effort[:, k] = -lam[:, model.all_rows_of("driver", name)[0]]
 
     data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
             "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],

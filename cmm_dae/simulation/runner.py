@@ -168,8 +168,9 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     if any(not p.startswith("initial.") for p in eq_values):
         model = None  # the solved parameters are compiled into the model: build it anew
     try:
-        model = model if model is not None else model_of(mech, _build)
-        if not model.dropped and model.m > 0:  # (a model given by the caller)
+        if model is None:  # built (or kept) without its redundant rows
+            model = model_of(mech, _build)
+        elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
             model = _without_redundant(model)
         build = time.perf_counter() - wall0
         hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))

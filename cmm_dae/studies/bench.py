@@ -20,7 +20,7 @@ from ..integrators import csegment
 from ..simulation.runner import simulate
 
 
-def _best(fn, repeat: int) -> tuple[float, object]:
+def best_time(fn, repeat: int) -> tuple[float, object]:
     """Best wall time of ``repeat`` warm runs (the first run warms caches and is dropped)."""
     res = fn()
     best = float("inf")
@@ -65,7 +65,7 @@ def bench_models(models: list[Path], *, t_end: float = 10.0, rtol: float = 1e-8,
                                                                dt=dt, model=mo)
         ida_wall = None
         for method, fn in runs.items():
-            wall, res = _best(fn, repeat)
+            wall, res = best_time(fn, repeat)
             ida_wall = wall if ida_wall is None else ida_wall
             rows.append({"model": path.stem, "method": method, "build_s": build,
                          "wall_s": wall, "wall_per_sim_s": wall / t_end,
@@ -88,7 +88,7 @@ def chain_growth(sizes: tuple[int, ...] = (8, 16, 32), *, t_end: float = 1.0,
     for n in sizes:
         mech = four_bar_chain(n)
         model = Model(mech)
-        wall, res = _best(lambda m=mech, mo=model: simulate(m, t_end, rtol=rtol,
+        wall, res = best_time(lambda m=mech, mo=model: simulate(m, t_end, rtol=rtol,
                                                             atol=rtol * 1e-2, model=mo), repeat)
         rows.append({"n": n, "unknowns": model.N, "wall_per_sim_s": wall / t_end,
                      "steps": res.stats.steps})

@@ -28,6 +28,7 @@ import numpy as np
 from ..core.errors import CmmError
 from ..description import iftomm
 from ..simulation.runner import run_dae
+from .bench import best_time
 
 __all__ = ["RTOLS", "a02_mujoco", "compare_a02", "mujoco_available", "peers_table"]
 
@@ -102,16 +103,6 @@ def _error(t: np.ndarray, tip: np.ndarray, n: int) -> float:
     return float(np.max(np.linalg.norm(tip - iftomm.a02_reference(n, t), axis=1)))
 
 
-def _best(fn, repeat: int) -> float:
-    fn()  # warm: imports, caches
-    best = math.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
                 rtols: tuple[float, ...] = RTOLS) -> dict:
     """One row of the comparison on A02 with ``n`` loops.
@@ -140,8 +131,8 @@ def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
     row = {"loops": n, "h": h, "mujoco_error": err_mj, "rtol": chosen,
            "cmm_dae_error": err if chosen is not None else math.nan}
     # side by side: alternating best-of-repeat timings
-    row["mujoco_s"] = _best(lambda: a02_mujoco(n, t_end, h), repeat)
-    row["cmm_dae_s"] = (_best(lambda: run_dae(mech, t_end, rtol=chosen), repeat)
+    row["mujoco_s"] = best_time(lambda: a02_mujoco(n, t_end, h), repeat)[0]
+    row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)[0]
                         if chosen is not None else math.nan)
     row["ratio"] = row["cmm_dae_s"] / row["mujoco_s"]
     first = math.nan
