@@ -24,6 +24,7 @@ from .description.library import example, examples
 from .description.loader import from_dict, load
 from .description.mechanism import (
     Body,
+    Curve,
     Damper,
     Driver,
     Element,
@@ -51,7 +52,8 @@ from .studies.sweep import SweepTable, sweep
 
 __all__ = [
     "METHODS", "STATUS_MESSAGES", "AssemblyError", "Body", "CmmError", "compare", "Comparison",
-    "Configuration", "Convergence", "convergence", "Damper", "Design", "DesignError", "design",
+    "Configuration", "Convergence", "Curve", "convergence", "Damper", "Design", "DesignError",
+    "design",
     "Driver", "Element", "Event", "EventKind",
     "example", "examples",
     "Friction", "from_dict", "Group", "Initial", "Joint", "labeller", "Law", "Limits", "load",

@@ -43,7 +43,7 @@ CASES = [
     ('connects = ["crank.B", "rod.B"]', 'connects = "crank.B"',
      r"\[joints\.B\] connects: expected two strings"),
     ('type = "revolute"\nconnects = ["crank.B"', 'type = "hinge"\nconnects = ["crank.B"',
-     r"\[joints\.B\] type: expected 'revolute' or 'prismatic', got 'hinge'"),
+     r"\[joints\.B\] type: expected one of 'revolute', 'prismatic', 'contact', got 'hinge'"),
     ("axis = [1.0, 0.0]", "axis = [0.0, 0.0]", r"\[joints\.E\] axis: expected a non-zero"),
     ("axis = [1.0, 0.0]", "axis = [1.0]", r"\[joints\.E\] axis: expected a list of 2 numbers"),
     ('motion = "constant_speed"', 'motion = "constant_sped"',

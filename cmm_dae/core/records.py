@@ -22,6 +22,8 @@ class EventKind(StrEnum):
     SLIP = "slip"  #: a joint with friction slips (or its friction reverses)
     ZONE = "zone"  #: a load's zone entered or left
     SINGULAR = "singular"  #: a singular position passed
+    LANDING = "landing"  #: a unilateral contact met its curve and holds (an impact)
+    LIFT_OFF = "lift-off"  #: a unilateral contact let go (its force would pull)
 
 
 @dataclass(frozen=True)
@@ -76,7 +78,10 @@ class Event:
         entered or left), ``"stick"`` and ``"slip"`` (dry friction; ``side`` "stick",
         "positive" or "negative", the force at the switch in ``release_force``),
         ``"singular"`` (a singular position passed: crossed on the branch of the motion or
-        onto the branch a rule asks for, or integrated through by IDA, as its note says).
+        onto the branch a rule asks for, or integrated through by IDA, as its note says),
+        ``"landing"`` and ``"lift-off"`` (a unilateral contact joint meets its curve and
+        holds, with the impact's impulses and energy lost, or lets go; a landing that
+        rebounds is a ``"bounce"``).
     joint : str
         The metamorphic joint (for a zone: the joint whose coordinate defines it).
     side : str

@@ -10,12 +10,15 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..core.errors import Problem
-
-GROUND = "ground"
-
-
-JOINT_TYPES = ("revolute", "prismatic")
-
+from .joint_checks import (  # noqa: F401 (the names the description may use)
+    CURVES,
+    GROUND,
+    JOINT_TYPES,
+    SIDES,
+    _check_ref,
+    _finite,
+    joint_problems,
+)
 
 MOTIONS = ("constant_speed", "polynomial", "harmonic", "table")
 
@@ -24,27 +27,6 @@ LAWS = ("constant", "polynomial", "harmonic", "table", "motor")
 
 
 FRAMES = ("global", "body")
-
-
-def _finite(x) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _check_ref(m: Any, table: str, key: str, ref: str, out: list[Problem]) -> None:
-    if not isinstance(ref, str) or "." not in ref:
-        out.append(Problem(table, key, f"expected 'body.point', got {ref!r}"))
-        return
-    body, pt = ref.split(".", 1)
-    if body == GROUND:
-        if pt not in m.ground:
-            out.append(Problem(table, key, f"unknown ground point '{pt}' in {ref!r} "
-                               f"(ground points: {', '.join(m.ground) or 'none'})"))
-    elif body not in m.bodies:
-        out.append(Problem(table, key, f"unknown body '{body}' in {ref!r} "
-                           f"(bodies: {', '.join(m.bodies) or 'none'})"))
-    elif pt not in m.bodies[body].points:
-        out.append(Problem(table, key, f"body '{body}' has no point '{pt}' "
-                           f"(its points: {', '.join(m.bodies[body].points) or 'none'})"))
 
 
 def _numbers(x: Any, key: str):
@@ -87,29 +69,6 @@ def non_finite(m: Any) -> list[Problem]:
 
 
 
-def _friction_problems(t: str, j) -> list[Problem]:
-    """A joint's friction table: static >= kinetic >= 0, mu_static >= mu_kinetic >= 0,
-    and a pin radius exactly where a revolute joint's levels grow with its reaction."""
-    f, out = j.friction, []
-    fs, fk = f.static, f.kinetic
-    if not (_finite(fs) and _finite(fk) and fs >= fk >= 0):
-        out.append(Problem(t, "friction", f"expected static >= kinetic >= 0 "
-                           f"({'N' if j.type == 'prismatic' else 'N m'}), got "
-                           f"static = {fs}, kinetic = {fk}"))
-    ms, mk = f.mu_static, f.mu_kinetic
-    if not (_finite(ms) and _finite(mk) and ms >= mk >= 0):
-        out.append(Problem(t, "friction", f"expected mu_static >= mu_kinetic >= 0, got "
-                           f"mu_static = {ms}, mu_kinetic = {mk}"))
-    elif j.type == "revolute" and f.from_reaction and not (_finite(f.radius)
-                                                            and f.radius > 0):
-        out.append(Problem(t, "friction.radius", "expected the pin radius > 0 (m): a "
-                           "revolute joint's friction from its reaction is mu radius |F|, "
-                           f"got radius = {f.radius}"))
-    if j.type == "prismatic" and f.radius != 0.0:
-        out.append(Problem(t, "friction.radius", "a prismatic joint's friction from its "
-                           "reaction is mu |N|: it has no radius"))
-    return out
-
 def validate(m: Any) -> list[Problem]:
     """All semantic problems of a mechanism (empty list when it is sound): the checks of
     each table, and every non-finite number (:func:`non_finite`) they did not report."""
@@ -142,34 +101,8 @@ def validate(m: Any) -> list[Problem]:
     used_bodies: set[str] = set()
     for name, j in m.joints.items():
         t = f"joints.{name}"
-        if j.type not in JOINT_TYPES:
-            out.append(Problem(t, "type", f"expected one of {', '.join(JOINT_TYPES)}, "
-                               f"got {j.type!r}"))
-        _check_ref(m, t, "connects", j.first, out)
-        _check_ref(m, t, "connects", j.second, out)
-        if j.first_body == j.second_body:
-            out.append(Problem(t, "connects", f"joins body '{j.first_body}' to itself"))
+        out += joint_problems(m, t, j)
         used_bodies.update((j.first_body, j.second_body))
-        if j.type == "prismatic" and not (all(_finite(a) for a in j.axis)
-                                          and math.hypot(*j.axis) > 1e-12):
-                out.append(Problem(t, "axis", f"expected a non-zero direction, got {j.axis}"))
-        if j.limits is not None:
-            lo, up = j.limits.lower, j.limits.upper
-            if lo is None and up is None:
-                out.append(Problem(t, "limits", "give 'lower', 'upper' or both"))
-            if lo is not None and up is not None and not lo < up:
-                out.append(Problem(t, "limits", f"lower ({lo}) must be below upper ({up})"))
-        if not (_finite(j.restitution) and 0.0 <= j.restitution <= 1.0):
-            out.append(Problem(t, "restitution", f"expected a number in [0, 1], "
-                               f"got {j.restitution}"))
-        if j.spring is not None and not (_finite(j.spring.stiffness) and j.spring.stiffness >= 0):
-            out.append(Problem(t, "spring.stiffness", "expected a stiffness >= 0, "
-                               f"got {j.spring.stiffness}"))
-        if j.damper is not None and not (_finite(j.damper.damping) and j.damper.damping >= 0):
-            out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
-                               f"got {j.damper.damping}"))
-        if j.friction is not None:
-            out += _friction_problems(t, j)
     for name in m.bodies:
         if name not in used_bodies:
             out.append(Problem(f"bodies.{name}", "", "is connected by no joint"))
@@ -178,9 +111,10 @@ def validate(m: Any) -> list[Problem]:
         if name not in m.joints:
             out.append(Problem(t, "", f"drives unknown joint '{name}' "
                                f"(joints: {', '.join(m.joints) or 'none'})"))
-        elif m.joints[name].limits is not None:
-            out.append(Problem(t, "", f"joint '{name}' has limits: a driven joint cannot be "
-                               "metamorphic"))
+        elif m.joints[name].stops is not None:
+            out.append(Problem(t, "", f"joint '{name}' has "
+                               f"{'limits' if m.joints[name].limits else 'a unilateral contact'}"
+                               ": a driven joint cannot be metamorphic"))
         elif m.joints[name].friction is not None:
             out.append(Problem(t, "", f"joint '{name}' has friction: the driver would carry "
                                "it (put the friction on an undriven joint)"))

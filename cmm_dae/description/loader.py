@@ -17,6 +17,8 @@ from typing import Any
 
 from ..core.errors import ModelError, Problem
 from . import schema
+from .checks import JOINT_TYPES
+from .contact_keys import contact_keys
 from .mechanism import (
     LAWS,
     MOTIONS,
@@ -282,13 +284,10 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     t = f"joints.{name}"
     d = r.keys(t, d, JOINT_KEYS)
     jtype = r.string(t, d, "type")
-    if jtype and jtype not in ("revolute", "prismatic"):
-        r.bad(t, "type", f"expected 'revolute' or 'prismatic', got {jtype!r}")
+    if jtype and jtype not in JOINT_TYPES:
+        r.bad(t, "type", f"expected one of {', '.join(map(repr, JOINT_TYPES))}, got {jtype!r}")
     first, second = _connects(r, t, d)
-    if jtype == "revolute":
-        for k in ("axis", "angle"):
-            if k in d:
-                r.bad(t, k, "only a prismatic joint has this key")
+    curve, side, unilateral = contact_keys(r, t, d, jtype)
     axis = r.vec(t, d, "axis", 2, default=default("joints", "axis"))
     angle = r.num(t, d, "angle", default=default("joints", "angle"))
     limits = None
@@ -298,8 +297,9 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
         limits = Limits(r.num(f"{t}.limits", lt, "lower", None),
                         r.num(f"{t}.limits", lt, "upper", None))
     restitution = r.num(t, d, "restitution", default=default("joints", "restitution"))
-    if "restitution" in d and limits is None:
-        r.bad(t, "restitution", "a restitution needs 'limits' to act on")
+    if "restitution" in d and limits is None and not unilateral:
+        r.bad(t, "restitution", "a restitution needs 'limits' (or a unilateral contact) to "
+              "act on")
     spring = damper = None
     if "spring" in d:
         st = r.keys(f"{t}.spring", r.sub(t, d, "spring"),
@@ -319,7 +319,7 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
                               for k in ("static", "kinetic", "mu_static", "mu_kinetic",
                                         "radius")))
     return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper,
-                 friction)
+                 friction, curve, side, unilateral)
 
 
 def _connects(r: _Reader, t: str, d: dict) -> tuple[str, str]:

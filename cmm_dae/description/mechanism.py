@@ -17,9 +17,9 @@ from ..core.errors import ModelError, Problem
 from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
 
 __all__ = [
-    "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Damper", "Driver",
-    "Element", "Friction", "Initial", "Joint", "Law", "Limits", "Load", "Mechanism", "Spring",
-    "Zone", "require_mechanism", "validate",
+    "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Curve", "Damper",
+    "Driver", "Element", "Friction", "Initial", "Joint", "Law", "Limits", "Load", "Mechanism",
+    "Spring", "Zone", "require_mechanism", "validate",
 ]
 
 
@@ -143,6 +143,23 @@ class Friction:
 
 
 @dataclass(frozen=True)
+class Curve:
+    """The curve of a contact joint, in its first body's frame, through the first
+    connect point (its origin).
+
+    kind : {"circle", "line"}
+        ``circle``: centred on the origin point, of ``radius`` (m); its arc length is
+        measured counter-clockwise from the body's x axis, ``radius * atan2`` in
+        (-pi radius, pi radius]. ``line``: through the origin point along ``direction``
+        (normalised on use); its arc length is the distance along it from the origin.
+    """
+
+    kind: Literal["circle", "line"] = "circle"
+    radius: float = 0.0
+    direction: Vec2 = (1.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Joint(_TwoPoints):
     """A lower pair between two bodies (either may be ``ground``).
 
@@ -168,10 +185,21 @@ class Joint(_TwoPoints):
         Damper on the joint coordinate rate.
     friction : Friction or None
         Dry friction (stick/slip, event-located; no regularisation).
+    curve : Curve or None
+        Contact: the curve of the first body the second point stays on.
+    side : {"outside", "inside"}
+        Contact: the side of the curve the point keeps to (a circle's outside or inside;
+        a line's left of its direction, or its right).
+    unilateral : bool
+        Contact: the point may leave the curve (it lifts off when the contact would have
+        to pull, lands again with ``restitution``); its coordinate is then its distance
+        from the curve on its side (the gap, m, >= 0). A bilateral contact (a pin in a
+        slot) keeps to the curve; its coordinate is the arc length (m), ``limits`` its
+        ends.
     """
 
     name: str
-    type: Literal["revolute", "prismatic"]
+    type: Literal["revolute", "prismatic", "contact"]
     first: str
     second: str
     axis: Vec2 = (1.0, 0.0)
@@ -181,10 +209,29 @@ class Joint(_TwoPoints):
     spring: Spring | None = None
     damper: Damper | None = None
     friction: Friction | None = None
+    curve: Curve | None = None
+    side: str = "outside"
+    unilateral: bool = False
 
     @property
     def unit(self) -> str:
         return "rad" if self.type == "revolute" else "m"
+
+    @property
+    def rows(self) -> int:
+        """Constraint rows the joint holds with no stop locked: 2 for a lower pair, 1 for
+        a bilateral contact, 0 for a unilateral one."""
+        if self.type != "contact":
+            return 2
+        return 0 if self.unilateral else 1
+
+    @property
+    def stops(self) -> Limits | None:
+        """Where the joint's coordinate meets a stop: its ``limits``, or for a unilateral
+        contact the curve itself (gap 0)."""
+        if self.type == "contact" and self.unilateral:
+            return Limits(lower=0.0)
+        return self.limits
 
 
 @dataclass(frozen=True)
@@ -398,14 +445,16 @@ class Mechanism:
 
     @property
     def limited_joints(self) -> list[str]:
-        """Names of the joints with limits (the metamorphic joints), in file order."""
-        return [n for n, j in self.joints.items() if j.limits is not None]
+        """Names of the joints with stops (the metamorphic joints: limits, unilateral
+        contacts), in file order."""
+        return [n for n, j in self.joints.items() if j.stops is not None]
 
     @property
     def lockable_joints(self) -> list[str]:
-        """Joints that can lock: on a stop (limits) or sticking (friction), in file order."""
+        """Joints that can lock: on a stop (limits, a unilateral contact's curve) or
+        sticking (friction), in file order."""
         return [n for n, j in self.joints.items()
-                if j.limits is not None or j.friction is not None]
+                if j.stops is not None or j.friction is not None]
 
     @property
     def frictional_joints(self) -> list[str]:

@@ -17,58 +17,12 @@ ordered, a driven joint has no limits, ...) stay in :mod:`cmm_dae.description.ch
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from typing import Any
 
-from .checks import FRAMES, JOINT_TYPES, LAWS, MOTIONS
+from .checks import CURVES, FRAMES, JOINT_TYPES, LAWS, MOTIONS, SIDES
+from .spec import REQUIRED, Key, Table  # noqa: F401 (schema.Key and schema.Table, as before)
 
-
-class _Required:
-    def __repr__(self) -> str:
-        return "required"
-
-
-#: Marks a key without a default.
-REQUIRED: Any = _Required()
-
-
-@dataclass(frozen=True)
-class Key:
-    """One key of a table.
-
-    ``kind`` is one of ``number``, ``string``, ``choice``, ``vector2``, ``vector3``,
-    ``numbers`` (a list of any length), ``pair`` (two ``"body.point"`` strings),
-    ``paths`` (``"position"`` or a list of strings), ``table`` (an inline sub-table with
-    ``keys``), ``map`` (names of the user's choosing to ``of`` values).
-    """
-
-    kind: str
-    doc: str
-    unit: str = ""
-    default: Any = REQUIRED
-    choices: tuple[str, ...] = ()
-    keys: dict[str, Key] = field(default_factory=dict)
-    of: str = "number"
-    minimum: float | None = None
-    example: str = ""
-
-
-@dataclass(frozen=True)
-class Table:
-    """A table of the file: fixed ``keys``, or (``named``) one sub-table per user name.
-
-    ``variants`` names a discriminating key and, for each of its values, the extra keys that
-    value admits (a driver's ``motion``, a load's ``law``).
-    """
-
-    doc: str
-    keys: dict[str, Key]
-    named: bool = False
-    variants: tuple[str, dict[str, tuple[str, ...]]] | None = None
-    example: str = ""
-
-
-_COORD = "rad (revolute) or m (prismatic)"
+_COORD = "rad (revolute) or m (prismatic, contact)"
 _RATE = "rad/s or m/s"
 
 #: Extra keys of each law (loads) and each motion (drivers).
@@ -144,21 +98,42 @@ SPEC: dict[str, Table] = {
        'centroid = [0.025, 0.0]\npoints = { A = [0.0, 0.0], B = [0.05, 0.0] }'),
     "joints": Table("One table per joint between two bodies (or a body and the ground).", {
         "type": Key("choice", "revolute: coordinate theta_second - theta_first; prismatic: "
-                    "displacement of the second point from the first along `axis`",
+                    "displacement of the second point from the first along `axis`; contact: "
+                    "the second point on a `curve` of the first body (a higher pair), "
+                    "coordinate its arc length (bilateral) or its gap (unilateral)",
                     choices=JOINT_TYPES),
         "connects": Key("pair", "[\"body.point\", \"body.point\"]: the first and the second "
-                        "body and their points (`ground.X` for a ground point)"),
+                        "body and their points (`ground.X` for a ground point; a contact's "
+                        "curve passes through the first point)"),
         "axis": Key("vector2", "prismatic only: sliding direction in the first body's frame",
                     default=[1.0, 0.0]),
         "angle": Key("number", "prismatic only: the relative angle theta_second - "
                      "theta_first the joint holds", "rad", default=0.0),
+        "curve": Key("table", "contact only: the first body's curve, in its frame through the "
+                     "first point", keys={
+                         "kind": Key("choice", "circle (centred on the point; arc length "
+                                     "radius atan2 from the body's x axis) or line (through "
+                                     "the point; arc length along `direction`)",
+                                     choices=CURVES),
+                         "radius": Key("number", "circle: radius", "m", minimum=0.0,
+                                       default=0.0),
+                         "direction": Key("vector2", "line: direction in the first body's "
+                                          "frame", default=[1.0, 0.0])},
+                     default=None),
+        "side": Key("choice", "contact only: the side of the curve the point keeps to (a "
+                    "circle's outside or inside; left or right of a line's direction)",
+                    choices=SIDES, default="outside"),
+        "unilateral": Key("boolean", "contact only: the point may leave the curve (lift-off "
+                          "when the contact would pull, landing with `restitution`); its "
+                          "coordinate is then the gap (m)", default=False),
         "limits": Key("table", "extreme positions of the coordinate: a metamorphic joint "
                       "locks there (geometric constraint)", keys={
                           "lower": Key("number", "lower limit", _COORD, default=None),
                           "upper": Key("number", "upper limit", _COORD, default=None)},
                       default=None),
-        "restitution": Key("number", "Newton coefficient at the limits (0 plastic: the "
-                           "joint locks; > 0: it bounces)", minimum=0.0, default=0.0),
+        "restitution": Key("number", "Newton coefficient at the limits or a unilateral "
+                           "contact's landing (0 plastic: the joint locks; > 0: it bounces)",
+                           minimum=0.0, default=0.0),
         "spring": Key("table", "linear spring on the coordinate; a `rest` beyond a limit "
                       "preloads the joint onto it (force constraint)", keys={
                           "stiffness": Key("number", "stiffness", "N m/rad or N/m",
@@ -269,6 +244,8 @@ def _json(k: Key) -> dict:
             s["minimum"] = k.minimum
     elif k.kind == "string":
         s = {"type": "string"}
+    elif k.kind == "boolean":
+        s = {"type": "boolean"}
     elif k.kind == "choice":
         s = {"type": "string", "enum": list(k.choices)}
     elif k.kind in ("vector2", "vector3"):
@@ -349,7 +326,8 @@ def json_text() -> str:
 
 def _type_text(k: Key) -> str:
     return {"number": "number", "string": "string", "vector2": "[x, y]",
-            "vector3": "[x, y, theta]", "numbers": "list of numbers",
+            "vector3": "[x, y, theta]", "boolean": "true \\| false",
+            "numbers": "list of numbers",
             "pair": "two strings", "paths": "\"position\" or list of strings",
             "table": "inline table", "map": f"table of name = {k.of.replace('vector2', '[x, y]')}",
             "choice": " \\| ".join(f"`{c}`" for c in k.choices)}[k.kind]

@@ -118,7 +118,13 @@ def force_constraint_joints(mech: Mechanism) -> dict[str, str]:
 
 
 def _letter(mech: Mechanism, j: str) -> str:
-    return "R" if mech.joints[j].type == "revolute" else "P"
+    return {"revolute": "R", "prismatic": "P"}.get(mech.joints[j].type, "C")
+
+
+def _cost(mech: Mechanism, joints) -> int:
+    """Degrees of freedom the joints take: 2 a lower pair, 1 a contact (a higher pair,
+    counted as touching)."""
+    return sum(1 if mech.joints[j].type == "contact" else 2 for j in joints)
 
 
 def _other(mech: Mechanism, joint: str, body: str) -> str:
@@ -236,7 +242,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
     """
     joints = mech.joints
     metamorphic = set(mech.limited_joints)
-    mobility = 3 * len(mech.bodies) - 2 * len(joints)
+    mobility = 3 * len(mech.bodies) - _cost(mech, joints)
     known = {GROUND}
     active = []
     changed = True
@@ -310,7 +316,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
             if not connected(S, internal):
                 continue
             live = [j for j in internal if j not in welded]
-            f = 3 * len(combo) - 2 * (len(live) + len(external))
+            f = 3 * len(combo) - _cost(mech, live + list(external))
             meta = tuple(j for j in internal + external if j in metamorphic)
             if f != target or (target == 1 and not [m for m in meta if m not in welded]):
                 continue
@@ -373,7 +379,8 @@ def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET
     The structure analysis runs on the first label that needs it (a geometric lock), with
     a bounded search, so labels never cost more than a small fixed budget."""
     force = force_constraint_joints(mech)
-    mobility = 3 * len(mech.bodies) - 2 * len(mech.joints)
+    # a unilateral contact holds no row until it lands (a lock, as a stop's)
+    mobility = 3 * len(mech.bodies) - sum(j.rows for j in mech.joints.values())
     cache: list[Structure] = []
 
     def label(locked: dict[str, str]) -> tuple[str, int]:

@@ -40,6 +40,23 @@ from .unknowns import Unknowns, ground_pins
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
 
 
+def contact_gap_arc(j, d, theta1) -> tuple:
+    """A contact joint's gap (distance of the point from the curve on its ``side``, m) and
+    arc length (m) for ``d`` = point - curve origin (global, CasADi) and the first body's
+    angle ``theta1``. The gap is a distance, so its multiplier is the contact force (N)."""
+    dl = _rot(theta1).T @ d  # in the first body's frame, where the curve is given
+    c = j.curve
+    if c.kind == "circle":
+        r = ca.sqrt(ca.dot(dl, dl))
+        gap = r - c.radius
+        arc = c.radius * ca.atan2(dl[1], dl[0])
+    else:
+        u = np.array(c.direction, float) / math.hypot(*c.direction)
+        gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction
+        arc = u[0] * dl[0] + u[1] * dl[1]
+    return (gap if j.side == "outside" else -gap), arc
+
+
 def _rot(th):
     c, s = ca.cos(th), ca.sin(th)
     return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
@@ -174,14 +191,19 @@ class Model:
             dth = angle(j.second_body) - angle(j.first_body)
             if j.type == "revolute":
                 coords.append(dth)
-                rows += [d[0], d[1]]
-            else:
+                jrows = [d[0], d[1]]
+            elif j.type == "prismatic":
                 u = np.array(j.axis, float) / np.hypot(*j.axis)
                 ua = _rot(angle(j.first_body)) @ ca.DM(u)
                 na = ca.vertcat(-ua[1], ua[0])
                 coords.append(ca.dot(ua, d))
-                rows += [dth - smech.joints[name].angle, ca.dot(na, d)]
-            self.rows += [Row("joint", name), Row("joint", name)]
+                jrows = [dth - smech.joints[name].angle, ca.dot(na, d)]
+            else:  # a contact: the gap is its row (bilateral) or its coordinate's stop
+                gap, arc = contact_gap_arc(smech.joints[name], d, angle(j.first_body))
+                coords.append(gap if j.unilateral else arc)
+                jrows = [] if j.unilateral else [gap]
+            rows += jrows
+            self.rows += [Row("joint", name)] * len(jrows)
         c = ca.vertcat(*coords)
         jidx = {n: i for i, n in enumerate(self.joint_names)}
         self.jidx = jidx

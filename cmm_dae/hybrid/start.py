@@ -196,7 +196,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     c0 = model.joint_rates(q, v)[0]
     beyond = []
     for name in mech.limited_joints:
-        lim = mech.joints[name].limits
+        lim = mech.joints[name].stops
         val = float(c0[model.jidx[name]])
         tol = 1e-12 * max(1.0, abs(val))
         if (lim.lower is not None and val < lim.lower - tol) or (
@@ -210,7 +210,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     # impact (events.start_triggers).
     stops = {}
     for name in mech.limited_joints:
-        lim = mech.joints[name].limits
+        lim = mech.joints[name].stops
         val = float(c0[model.jidx[name]])
         for side, L in (("lower", lim.lower), ("upper", lim.upper)):
             if L is not None and on_stop(val, L):

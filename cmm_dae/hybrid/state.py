@@ -141,7 +141,7 @@ class HybridState:
     def limit_value(self, joint: str, side: str) -> float:
         if side == "stick":
             return self.stick_at[joint]
-        lim = self.model.mech.joints[joint].limits
+        lim = self.model.mech.joints[joint].stops
         return lim.lower if side == "lower" else lim.upper
 
     def _mode(self, locked: Locked, zones, slip) -> tuple:

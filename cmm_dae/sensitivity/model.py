@@ -175,7 +175,7 @@ class _SymbolicState(HybridState):
     def limit_value(self, joint: str, side: str):
         if side == "stick":
             return self.stick_at[joint]
-        lim = self.model.smech.joints[joint].limits
+        lim = self.model.smech.joints[joint].stops
         return lim.lower if side == "lower" else lim.upper
 
     def static(self, joint: str, lam=None):

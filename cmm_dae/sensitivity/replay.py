@@ -330,7 +330,7 @@ class SensitivityPass(CrossingPass):
             zq, zv = sq + np.outer(v, tau), sv + np.outer(a, tau)
             for tr, pa in zip(done, p_after, strict=True):
                 e = tr.event  # (a singular crossing is no trigger's transition)
-                if e.kind in ("lock", "limit", "bounce", "stick"):
+                if e.kind in ("lock", "limit", "landing", "bounce", "stick"):
                     zq, zv = self._impact(e, tr, v, t, p, dP, pa, zq, zv, tau)
                 p = pa
                 dP = self.dp_of(p)
@@ -356,8 +356,8 @@ class SensitivityPass(CrossingPass):
         else:
             p_lock = p_before.copy()
             p_lock[k] = 1.0
-            p_lock[nl + k] = model.mech.joints[j].limits.lower if e.side == "lower" else \
-                model.mech.joints[j].limits.upper
+            stops = model.mech.joints[j].stops
+            p_lock[nl + k] = stops.lower if e.side == "lower" else stops.upper
             self.dL[j] = self.unit(f"joints.{j}.limits.{e.side}")
         dPl = dP_before.copy()
         dPl[nl + k] = self.dL[j]

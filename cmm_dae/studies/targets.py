@@ -19,7 +19,8 @@ __all__ = ["Target", "parse_target"]
 
 
 #: The kinds of events (as in the event log) a target may name.
-KINDS = ("limit", "lock", "bounce", "release", "stick", "slip", "zone")
+KINDS = ("limit", "lock", "bounce", "release", "stick", "slip", "zone", "landing",
+         "lift-off")
 #: The series a target may name: (table, series) -> accessor names.
 _SERIES = {("joint", "position"), ("joint", "velocity"), ("joint", "acceleration"),
            ("joint", "torque"), ("driver", "effort")}

@@ -1,0 +1,133 @@
+"""Checks of one joint of a mechanism description: its type, points, axis, limits,
+spring, damper, friction, and a contact's curve (called by :func:`checks.validate`)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..core.errors import Problem
+
+GROUND = "ground"
+
+
+JOINT_TYPES = ("revolute", "prismatic", "contact")
+
+
+CURVES = ("circle", "line")
+
+
+SIDES = ("outside", "inside")
+
+
+def _finite(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _check_ref(m: Any, table: str, key: str, ref: str, out: list[Problem]) -> None:
+    if not isinstance(ref, str) or "." not in ref:
+        out.append(Problem(table, key, f"expected 'body.point', got {ref!r}"))
+        return
+    body, pt = ref.split(".", 1)
+    if body == GROUND:
+        if pt not in m.ground:
+            out.append(Problem(table, key, f"unknown ground point '{pt}' in {ref!r} "
+                               f"(ground points: {', '.join(m.ground) or 'none'})"))
+    elif body not in m.bodies:
+        out.append(Problem(table, key, f"unknown body '{body}' in {ref!r} "
+                           f"(bodies: {', '.join(m.bodies) or 'none'})"))
+    elif pt not in m.bodies[body].points:
+        out.append(Problem(table, key, f"body '{body}' has no point '{pt}' "
+                           f"(its points: {', '.join(m.bodies[body].points) or 'none'})"))
+
+
+def joint_problems(m: Any, t: str, j: Any) -> list[Problem]:
+    """Every problem of joint ``j`` (table ``t``) of mechanism ``m``."""
+    out: list[Problem] = []
+    if j.type not in JOINT_TYPES:
+        out.append(Problem(t, "type", f"expected one of {', '.join(JOINT_TYPES)}, "
+                           f"got {j.type!r}"))
+    _check_ref(m, t, "connects", j.first, out)
+    _check_ref(m, t, "connects", j.second, out)
+    if j.first_body == j.second_body:
+        out.append(Problem(t, "connects", f"joins body '{j.first_body}' to itself"))
+    if j.type == "prismatic" and not (all(_finite(a) for a in j.axis)
+                                      and math.hypot(*j.axis) > 1e-12):
+            out.append(Problem(t, "axis", f"expected a non-zero direction, got {j.axis}"))
+    if j.limits is not None:
+        lo, up = j.limits.lower, j.limits.upper
+        if lo is None and up is None:
+            out.append(Problem(t, "limits", "give 'lower', 'upper' or both"))
+        if lo is not None and up is not None and not lo < up:
+            out.append(Problem(t, "limits", f"lower ({lo}) must be below upper ({up})"))
+    if not (_finite(j.restitution) and 0.0 <= j.restitution <= 1.0):
+        out.append(Problem(t, "restitution", f"expected a number in [0, 1], "
+                           f"got {j.restitution}"))
+    if j.spring is not None and not (_finite(j.spring.stiffness) and j.spring.stiffness >= 0):
+        out.append(Problem(t, "spring.stiffness", "expected a stiffness >= 0, "
+                           f"got {j.spring.stiffness}"))
+    if j.damper is not None and not (_finite(j.damper.damping) and j.damper.damping >= 0):
+        out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
+                           f"got {j.damper.damping}"))
+    if j.type == "contact":
+        out += _contact_problems(t, j)
+    elif j.curve is not None or j.unilateral or j.side != "outside":
+        out.append(Problem(t, "curve", "only a contact joint has a curve, a side or "
+                           "'unilateral'"))
+    if j.friction is not None:
+        out += _friction_problems(t, j)
+    return out
+
+
+def _friction_problems(t: str, j) -> list[Problem]:
+    """A joint's friction table: static >= kinetic >= 0, mu_static >= mu_kinetic >= 0,
+    and a pin radius exactly where a revolute joint's levels grow with its reaction."""
+    f, out = j.friction, []
+    fs, fk = f.static, f.kinetic
+    if not (_finite(fs) and _finite(fk) and fs >= fk >= 0):
+        out.append(Problem(t, "friction", f"expected static >= kinetic >= 0 "
+                           f"({'N' if j.type == 'prismatic' else 'N m'}), got "
+                           f"static = {fs}, kinetic = {fk}"))
+    ms, mk = f.mu_static, f.mu_kinetic
+    if not (_finite(ms) and _finite(mk) and ms >= mk >= 0):
+        out.append(Problem(t, "friction", f"expected mu_static >= mu_kinetic >= 0, got "
+                           f"mu_static = {ms}, mu_kinetic = {mk}"))
+    elif j.type == "revolute" and f.from_reaction and not (_finite(f.radius)
+                                                            and f.radius > 0):
+        out.append(Problem(t, "friction.radius", "expected the pin radius > 0 (m): a "
+                           "revolute joint's friction from its reaction is mu radius |F|, "
+                           f"got radius = {f.radius}"))
+    if j.type == "prismatic" and f.radius != 0.0:
+        out.append(Problem(t, "friction.radius", "a prismatic joint's friction from its "
+                           "reaction is mu |N|: it has no radius"))
+    return out
+
+def _contact_problems(t: str, j) -> list[Problem]:
+    """A contact joint's curve, side and stops."""
+    out: list[Problem] = []
+    c = j.curve
+    if c is None:
+        out.append(Problem(t, "curve", "a contact joint needs its curve: { kind = \"circle\", "
+                           "radius = R } or { kind = \"line\", direction = [x, y] }"))
+    elif c.kind not in CURVES:
+        out.append(Problem(t, "curve.kind", f"expected one of {', '.join(CURVES)}, "
+                           f"got {c.kind!r}"))
+    elif c.kind == "circle" and not (_finite(c.radius) and c.radius > 0):
+        out.append(Problem(t, "curve.radius", f"expected a radius > 0 (m), got {c.radius}"))
+    elif c.kind == "line" and not (all(_finite(a) for a in c.direction)
+                                   and math.hypot(*c.direction) > 1e-12):
+        out.append(Problem(t, "curve.direction", "expected a non-zero direction, got "
+                           f"{c.direction}"))
+    if j.side not in SIDES:
+        out.append(Problem(t, "side", f"expected one of {', '.join(SIDES)}, got {j.side!r}"))
+    if not isinstance(j.unilateral, bool):
+        out.append(Problem(t, "unilateral", f"expected true or false, got {j.unilateral!r}"))
+    if j.unilateral and j.limits is not None:
+        out.append(Problem(t, "limits", "a unilateral contact's stop is its curve (it lands "
+                           "on it); limits on the arc length need a bilateral contact"))
+    if j.friction is not None:
+        out.append(Problem(t, "friction", "friction in a contact joint is not supported yet "
+                           "(put it on a revolute or prismatic joint)"))
+    return out
+
+
