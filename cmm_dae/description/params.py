@@ -34,7 +34,8 @@ _FIELDS = {
     "bodies": ("mass", "inertia"),
     "joints": ("angle", "restitution", "spring.stiffness", "spring.rest", "damper.damping",
                "limits.lower", "limits.upper", "friction.static", "friction.kinetic",
-               "friction.mu_static", "friction.mu_kinetic", "friction.radius"),
+               "friction.mu_static", "friction.mu_kinetic", "friction.radius",
+               "curve.radius"),
     "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
     "elements": ("stiffness", "rest", "damping", "preload"),
 }
@@ -57,9 +58,11 @@ def _no_effect(mech: Mechanism, parts: list[str]) -> str | None:
     if table == "joints":
         j = mech.joints[name]
         if fld == "angle" and j.type != "prismatic":
-            return f"joint '{name}' is revolute: 'angle' is read for prismatic joints only"
-        if fld == "restitution" and j.limits is None:
+            return f"joint '{name}' is {j.type}: 'angle' is read for prismatic joints only"
+        if fld == "restitution" and j.stops is None:
             return f"joint '{name}' has no limits for a restitution to act at"
+        if fld == "curve.radius" and (j.curve is None or j.curve.kind != "circle"):
+            return f"joint '{name}' has no circle for a radius to act on"
         if fld == "spring.rest" and j.spring is None:
             return (f"joint '{name}' has no spring: set joints.{name}.spring.stiffness to "
                     "give it one")

@@ -36,7 +36,14 @@ from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
 from . import csegment
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
-from .tolerances import ATOL_LAMBDA, ATOL_MU, ATOL_WORK, lambda_atol, lambda_scale
+from .tolerances import (
+    ATOL_LAMBDA,
+    ATOL_MU,
+    ATOL_WORK,
+    lambda_atol,
+    lambda_scale,
+    natural_step,
+)
 
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
 #: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
@@ -166,6 +173,13 @@ IN_PLACE_STEPS = 50
 #: A step shorter than this many units of round-off of the run's time scale counts as in
 #: place (about 1e-15 s on a 1-s run; IDA's steps there are 1e-7 s and more).
 CRAWL_STEP = 16.0
+#: Steps after which a segment that has not yet covered one step from its accelerations
+#: (``_first_step``, the order-1 step its tolerances allow) counts as crawling, a failure
+#: retried with that first step. IDA's own first step comes from y' alone; after a cam
+#: follower's landing at rtol 1e-12 it was 4e-15 s, where the index-2 Newton matrix
+#: (mass / h^2 beside the constraint rows) is solved with noise in the multipliers, and
+#: its steps stayed near 1e-13 s for 500,000 steps or grew back, as rounding fell.
+SLOW_STEPS = 200
 
 
 class IdaIntegrator(Integrator):
@@ -286,6 +300,8 @@ class IdaIntegrator(Integrator):
             self.n_steps += 1
             if self.n_steps > self.step_budget:
                 raise _StalledError
+            if self.n_steps == SLOW_STEPS and t - self.t_start < self.h_natural:
+                raise _CrawlError
             if self.opts.progress is not None:
                 self.opts.progress.update(t)
         out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
@@ -398,6 +414,10 @@ class IdaIntegrator(Integrator):
         self.ratio0 = singular_ratio(model, q, t0, self.p)
         y0, yp0 = u.start(q, v, a, lam, t0, model.fill(self.p, t0, q, v))
         self._roundoff_atol(y0)
+        t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
+        self.t_start = t0
+        # (a segment given its first step is not judged slow again: it fails otherwise)
+        self.h_natural = 0.0 if first_step else self._first_step(y0, yp0, t_stop - t0)
         ne = 1 + len(self.triggers)
         # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
         # failure next to a singular position halved its step down to 1e-17 s and then
@@ -467,7 +487,6 @@ class IdaIntegrator(Integrator):
                 max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
                 algebraic_idx=list(range(u.lam.start, u.N)),
                 **self.ls_options)
-        t_stop = next((b for b in self.breaks if b > t0 + 1e-12 * max(1.0, b)), opts.t_end)
         outs = _output_times(opts, t0)
         if t_stop < opts.t_end:
             outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
@@ -603,12 +622,10 @@ class IdaIntegrator(Integrator):
         return raised
 
     def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
-        """A first step (s) whose order-1 local error in the coordinates, h^2 / 2 |z''|
-        in IDA's weighted norm, is the tolerance: z'' is known at a consistent start."""
+        """:func:`~.tolerances.natural_step` of the coordinates at a consistent start."""
         nz = self.u.nz
-        wt = self.tol_scale / (self.rtol * np.abs(y0[:nz]) + self.atol[:nz])
-        norm = float(np.sqrt(np.mean((yp0[nz:2 * nz] * wt) ** 2))) if nz else 0.0
-        return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0
+        return natural_step(y0[:nz], yp0[nz:2 * nz], self.rtol / self.tol_scale,
+                            self.atol[:nz] / self.tol_scale, span)
 
     def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                         first_step: float) -> csegment.SegmentRun:

@@ -11,7 +11,7 @@ import numpy as np
 from ..equations.model import Model
 
 __all__ = ["ATOL_LAMBDA", "ATOL_LAMBDA_SINGULAR", "ATOL_MU", "ATOL_WORK", "FORCE_REF",
-           "lambda_atol", "lambda_scale"]
+           "lambda_atol", "lambda_scale", "natural_step"]
 
 #: Absolute tolerances on the multipliers. Both are index-2 variables of the GGL form and
 #: scikit-sundae cannot suppress them from the error test. mu (zero on the exact solution)
@@ -64,3 +64,19 @@ def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
         return 1.0
     force = max(float(np.max(np.abs(x), initial=0.0)) for x in (lam, qf, model.mass * a))
     return max(1.0, force / FORCE_REF) if math.isfinite(force) else 1.0
+
+
+def natural_step(z: np.ndarray, zdd: np.ndarray, rtol: float, atol: np.ndarray | float,
+                 span: float) -> float:
+    """A first step (s) for IDA from a consistent start: the one whose order-1 local error
+    in the coordinates ``z``, h^2 / 2 |z''| in IDA's weighted RMS norm (weights
+    1 / (rtol |z| + atol)), is the tolerance; at most 1e-3 ``span``, 0 when z'' = 0.
+
+    IDA's own first step comes from y' alone: at tight tolerances it can be so short
+    (4e-15 s after a cam follower's landing at rtol 1e-12) that the index-2 Newton matrix,
+    mass / h^2 beside the constraint rows, is solved with noise in the multipliers."""
+    if not z.size:
+        return 0.0
+    wt = 1.0 / (rtol * np.abs(z) + atol)
+    norm = float(np.sqrt(np.mean((zdd * wt) ** 2)))
+    return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0

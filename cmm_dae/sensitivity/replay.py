@@ -16,7 +16,7 @@ from ..hybrid import policy as ev
 from ..hybrid.start import start_spec
 from ..hybrid.state import SegmentTrace
 from ..integrators.ida import quiet_sundials
-from ..integrators.tolerances import ATOL_MU, lambda_atol
+from ..integrators.tolerances import ATOL_MU, lambda_atol, natural_step
 from ..results.result import Result
 from ..singular.step import step_over
 from .crossing import CrossingPass
@@ -280,12 +280,15 @@ class SensitivityPass(CrossingPass):
         if tspan.size == 2:  # scikit-sundae returns its own steps for two points
             extra = 0.5 * (tspan[0] + tspan[1])
             tspan = np.array([tspan[0], extra, tspan[1]])
+        # the first step from the accelerations, not IDA's from y' alone (tiny at tight
+        # tolerances, where the Newton matrix's noise kept the steps tiny: natural_step)
+        h0 = natural_step(q, a, self.rtol, self.atol, float(tspan[-1]) - t0)
         for control in ((True, False) if self.error_control else (False,)):
             atol = np.concatenate([base] + [np.maximum(base / scale[i] * (1.0 if control
                                                                           else LOOSE), off)
                                             for i in range(P)])
             solver = sun.ida.IDA(resfn, jacfn=jacfn, rtol=self.rtol, atol=atol,
-                                 algebraic_idx=alg, max_num_steps=10**7)
+                                 algebraic_idx=alg, max_num_steps=10**7, first_step=h0)
             with quiet_sundials():
                 r = solver.solve(tspan, Y0, Yp0)
             self.nfev += int(r.nfev)
