@@ -1,0 +1,370 @@
+"""Contact joints (higher pairs): a point of one body on a circle or a line of another.
+
+References, each independent of the code under test:
+
+* a knife-edge follower on an eccentric circular cam turning at constant speed, in closed
+  form: in contact its height is y(t) = e sin(wt) + sqrt(R^2 - e^2 cos^2(wt)); it lifts
+  off where y'' = -g (the contact force m (y'' + g) / n_y reaches zero), flies freely
+  (a parabola) and lands where the parabola meets y(t) again (plastic: it takes the cam's
+  speed). The times are roots of these explicit functions (brentq to 1e-15 s).
+* a rod pivoted at O whose slider runs in a circular slot about O (bilateral contact): a
+  pendulum of inertia I_O, against DOP853 at rtol 1e-13; the slot's force on the slider
+  is m (g cos(phi) + R phi'^2) (its radial equation).
+* a crank driving a slotted lever (bilateral line contact): the lever's angle and the
+  pin's place along the slot in closed form.
+* a ball on a vertical guide dropped onto a ground line with restitution e: bounce times
+  sqrt(2h/g) (1 + 2e + ... + 2e^k), ending on the Zeno rule at sqrt(2h/g) (1+e)/(1-e).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+import cmm_dae as cd
+
+E, R, W, G = 0.01, 0.04, 40.0, 9.81  # cam eccentricity m, radius m, speed rad/s; gravity
+M_F = 0.2  # follower mass, kg
+
+
+def cam_mechanism(**kw) -> cd.Mechanism:
+    return cd.Mechanism(
+        "cam", ground={"O": (0.0, 0.0)},
+        bodies=[cd.Body("cam", 1.0, 1e-3, centroid=(E, 0.0), points={"O": (0, 0), "C": (E, 0)}),
+                cd.Body("follower", M_F, 1e-4, points={"tip": (0.0, 0.0)},
+                        guess=(0.0, 0.05, 0.0))],
+        joints=[cd.Joint("A", "revolute", "ground.O", "cam.O"),
+                cd.Joint("F", "prismatic", "ground.O", "follower.tip", axis=(0.0, 1.0)),
+                cd.Joint("K", "contact", "cam.C", "follower.tip",
+                         curve=cd.Curve("circle", radius=R), unilateral=True, **kw)],
+        drivers=[cd.Driver("A", speed=W)],
+        initial=cd.Initial(joints={"K": 0.0}, velocities={"K": 0.0}))
+
+
+def _y(t):
+    s, c = np.sin(W * t), np.cos(W * t)
+    return E * s + np.sqrt(R**2 - E**2 * c**2)
+
+
+def _yd(t):
+    s, c = np.sin(W * t), np.cos(W * t)
+    return W * (E * c + E**2 * c * s / np.sqrt(R**2 - E**2 * c**2))
+
+
+def _ydd(t):
+    s, c = np.sin(W * t), np.cos(W * t)
+    D = R**2 - E**2 * c**2
+    return W**2 * (-E * s + E**2 * (c * c - s * s) / np.sqrt(D) - (E**2 * c * s) ** 2 / D**1.5)
+
+
+def _root(f, a: float, b: float, step: float = 1e-4) -> float:
+    """First downward zero of f after a (to 1e-15 s)."""
+    x = np.arange(a, b, step)
+    i = int(np.nonzero(f(x) < 0)[0][0])
+    return brentq(f, x[i - 1], x[i], xtol=1e-15, rtol=1e-15)
+
+
+def cam_reference(t_end: float):
+    """[(t, kind, approach speed)] of the lift-offs and landings, and the height y(t)."""
+    events, flights = [], []
+    t = 0.0
+    while True:
+        t_off = _root(lambda s: _ydd(s) + G, t + 1e-9, t + 0.3)
+        if t_off > t_end:
+            break
+        events.append((t_off, "lift-off", 0.0))
+        y0, v0 = float(_y(t_off)), float(_yd(t_off))
+
+        def gap(s, y0=y0, v0=v0, t0=t_off):
+            return y0 + v0 * (s - t0) - 0.5 * G * (s - t0) ** 2 - _y(s)
+
+        t = _root(gap, t_off + 1e-6, t_off + 0.3)
+        flights.append((t_off, t, y0, v0))
+        if t > t_end:
+            break
+        # the gap's rate at the landing: n_y (v_follower - y'), n the cam's normal there
+        n_y = (float(_y(t)) - E * math.sin(W * t)) / R
+        events.append((t, "landing", n_y * (v0 - G * (t - t_off) - float(_yd(t)))))
+        assert _ydd(t) + G > 0  # it stays on the cam after the landing
+
+    def height(s):
+        out = _y(s)
+        for a, b, y0, v0 in flights:
+            m = (s > a) & (s < b)
+            out[m] = y0 + v0 * (s[m] - a) - 0.5 * G * (s[m] - a) ** 2
+        return out
+
+    return events, height
+
+
+@pytest.fixture(scope="module")
+def cam_run():
+    return cd.run_dae(cam_mechanism(), 2.0, rtol=1e-10, output_dt=1e-3)
+
+
+def test_cam_follower_lift_off_and_landing_times_and_height(cam_run):
+    """Over 12.7 cam turns (25 events): every lift-off and landing within 1e-8 s of the
+    closed form, the follower's height within 1e-8 m away from them (measured 6e-12 s
+    and 4e-12 m at rtol 1e-10), each landing's approach speed and energy lost (the
+    follower's 1/2 m (v-^2 - v+^2): the cam is driven) within 1e-7."""
+    ref, height = cam_reference(2.0)
+    got = [e for e in cam_run.events if e.kind in ("lift-off", "landing")]
+    assert [e.kind for e in got] == [k for _, k, _ in ref]
+    assert len(got) == 25
+    assert cam_run.events[0].kind == "lock" and cam_run.events[0].t == 0.0  # starts touching
+    for e, (t, kind, v) in zip(got, ref, strict=True):
+        assert abs(e.t - t) <= 1e-8
+        if kind == "landing":
+            assert e.velocity_before == pytest.approx(v, abs=1e-7)  # the gap's rate
+            assert e.velocity_after == 0.0
+            v_cam = float(_yd(t))
+            v_f = v_cam + v * R / (float(_y(t)) - E * math.sin(W * t))
+            lost = 0.5 * M_F * (v_f**2 - v_cam**2)
+            assert e.energy_lost == pytest.approx(lost, abs=1e-8)
+    t = cam_run.t
+    far = np.min(np.abs(t[:, None] - np.array([x for x, _, _ in ref])[None, :]), axis=1) > 1e-6
+    y = cam_run.joint("F").position
+    assert np.max(np.abs(y - height(t))[far]) <= 1e-8
+
+
+def test_cam_follower_contact_force(cam_run):
+    """In contact the force on the follower is along the cam's normal n with
+    N n_y = m (y'' + g); in flight it is zero. Within 1e-6 N of the closed form."""
+    ref, _ = cam_reference(2.0)
+    t = cam_run.t
+    F = cam_run.joint("K").force
+    y = cam_run.joint("F").position
+    times = [x for x, _, _ in ref]
+    k = np.searchsorted(times, t)  # events before each sample: even = in contact
+    far = np.min(np.abs(t[:, None] - np.array(times)[None, :]), axis=1) > 1e-6
+    touching = far & (k % 2 == 0)
+    flying = far & (k % 2 == 1)
+    assert touching.sum() > 500 and flying.sum() > 500
+    ny = (y - E * np.sin(W * t)) / R
+    assert np.max(np.abs(F[touching, 1] - M_F * (_ydd(t) + G)[touching])) <= 1e-6
+    nx = -E * np.cos(W * t) / R
+    assert np.max(np.abs(F[touching, 0] * ny[touching] - F[touching, 1] * nx[touching])) <= 1e-6
+    assert np.max(np.abs(F[flying])) == 0.0
+
+
+def test_cam_follower_iterative_algorithm():
+    """The fixed-step algorithm at dt 1e-4 s: the same 25 events, each within 2e-3 s
+    (measured 2e-4 s)."""
+    ref, _ = cam_reference(2.0)
+    res = cd.run_iterative(cam_mechanism(), 2.0, dt=1e-4)
+    got = [e for e in res.events if e.kind in ("lift-off", "landing")]
+    assert [e.kind for e in got] == [k for _, k, _ in ref]
+    assert max(abs(e.t - t) for e, (t, _, _) in zip(got, ref, strict=True)) <= 2e-3
+
+
+@pytest.mark.parametrize("path", ["bodies.cam.points.C.x", "joints.K.curve.radius",
+                                  "drivers.A.speed"])
+def test_cam_follower_sensitivities_through_lift_off_and_landing(path):
+    """d t_event / d p through three lift-offs and landings against central differences
+    (h 1e-5 relative, runs at rtol 1e-12): within 2e-6 of the largest derivative
+    (measured 5e-8, 4e-7, 2e-8)."""
+    from cmm_dae.description.params import param_value
+
+    mech = cam_mechanism()
+    s = cd.sensitivities(mech, [path], 0.5, rtol=1e-11)
+    kinds = [e.kind for e in s.result.events]
+    assert kinds.count("landing") == 3 and kinds.count("lift-off") == 4
+    x0 = param_value(mech, path)
+    h = 1e-5 * abs(x0)
+    ts = [np.array([e.t for e in cd.run_dae(cd.with_params(mech, {path: x}), 0.5,
+                                           rtol=1e-12).events]) for x in (x0 + h, x0 - h)]
+    fd = (ts[0] - ts[1]) / (2 * h)
+    assert np.max(np.abs(s.event_times[:, 0] - fd)) <= 2e-6 * np.max(np.abs(fd))
+
+
+# ------------------------------------------------------------------ bilateral contacts
+RS, MS, MR = 0.6, 0.3, 1.0  # slot radius m, slider and rod masses kg
+
+
+def slot_pendulum(limits=None) -> cd.Mechanism:
+    return cd.Mechanism(
+        "slot", ground={"O": (0.0, 0.0)},
+        bodies=[cd.Body("rod", MR, 1 / 12, centroid=(0.5, 0.0), points={"O": (0, 0)}),
+                cd.Body("slider", MS, 1e-4, points={"P": (0, 0)}, guess=(0.0, -RS, 0.0))],
+        joints=[cd.Joint("A", "revolute", "ground.O", "rod.O"),
+                cd.Joint("S", "prismatic", "rod.O", "slider.P"),
+                cd.Joint("K", "contact", "ground.O", "slider.P", side="inside",
+                         curve=cd.Curve("circle", radius=RS), limits=limits)],
+        initial=cd.Initial(joints={"A": -math.pi / 2 + 1.0}))
+
+
+def _pendulum(t_end: float, **kw):
+    k = (MR * G * 0.5 + MS * G * RS) / (MR / 3 + MS * RS**2 + 1e-4)
+    return solve_ivp(lambda t, y: [y[1], -k * math.sin(y[0])], (0.0, t_end), [1.0, 0.0],
+                     method="DOP853", rtol=1e-13, atol=1e-14, dense_output=True, **kw)
+
+
+def test_slider_in_a_circular_slot_against_the_pendulum():
+    """The slot's arc length R (phi - pi/2) within 1e-8 m of R times the pendulum's angle
+    (measured 8e-10), the slot's force m (g cos(phi) + R phi'^2) within 1e-7 N (9e-9),
+    the energy audit within 1e-7 J over 3 s."""
+    res = cd.run_dae(slot_pendulum(), 3.0, rtol=1e-10, output_dt=0.01)
+    assert res.events == []
+    ref = _pendulum(3.0)
+    phi, om = ref.sol(res.t)
+    assert np.max(np.abs(res.joint("K").position - RS * (phi - math.pi / 2))) <= 1e-8
+    N = np.hypot(*res.joint("K").force.T)
+    assert np.max(np.abs(N - MS * (G * np.cos(phi) + RS * om**2))) <= 1e-7
+    assert abs(res.energy().residual[-1]) <= 1e-7
+
+
+def test_slot_end_is_a_stop():
+    """A slot ending 0.7 rad past the bottom: the slider reaches it when the pendulum
+    does (within 1e-8 s), locks plastically and is released at once (gravity pulls it
+    back), as a prismatic joint's limit."""
+    end = -math.pi / 2 - 0.7
+    res = cd.run_dae(slot_pendulum(cd.Limits(lower=RS * end)), 1.0, rtol=1e-10)
+
+    def at_end(t, y):
+        return y[0] + 0.7
+
+    at_end.terminal = True
+    t_ref = float(_pendulum(3.0, events=at_end).t_events[0][0])
+    assert [e.kind for e in res.events[:2]] == ["limit", "release"]
+    assert abs(res.events[0].t - t_ref) <= 1e-8
+    assert res.events[0].side == "lower"
+
+
+def test_crank_and_slotted_lever_kinematics():
+    """A crank (0.1 m, driven at 2 rad/s) whose pin runs in a slot along a lever pivoted
+    0.3 m below the crank's pivot: the lever's angle atan2(d + r sin, r cos) and the pin's
+    place along the slot |P - O2| within 1e-9 of the closed form."""
+    r, d = 0.1, 0.3
+    mech = cd.Mechanism(
+        "slotted_lever", ground={"O1": (0.0, 0.0), "O2": (0.0, -d)},
+        bodies=[cd.Body("crank", 0.5, 1e-3, points={"O": (0, 0), "P": (r, 0)}),
+                cd.Body("lever", 1.0, 0.03, centroid=(0.2, 0.0), points={"O": (0, 0)},
+                        guess=(0.0, -d, math.pi / 2))],
+        joints=[cd.Joint("A", "revolute", "ground.O1", "crank.O"),
+                cd.Joint("B", "revolute", "ground.O2", "lever.O"),
+                cd.Joint("K", "contact", "lever.O", "crank.P",
+                         curve=cd.Curve("line", direction=(1.0, 0.0)))],
+        drivers=[cd.Driver("A", speed=2.0)])
+    res = cd.run_dae(mech, 3.0, rtol=1e-10, output_dt=0.05)
+    th = 2.0 * res.t
+    px, py = r * np.cos(th), r * np.sin(th) + d
+    psi = np.unwrap(np.arctan2(py, px))
+    assert np.max(np.abs(res.joint("B").position - psi)) <= 1e-9
+    assert np.max(np.abs(res.joint("K").position - np.hypot(px, py))) <= 1e-9
+
+
+def test_ball_bounces_on_a_line_then_lands():
+    """Restitution 0.5 from 0.2 m: the bounces at sqrt(2h/g)(1 + 2e + ... + 2e^k) within
+    1e-8 s (measured 8e-9 after 18 bounces), each leaving at e times its arrival speed;
+    the Zeno rule ends them with a landing before their limit sqrt(2h/g)(1 + e)/(1 - e)
+    (within 1e-5 s of it: measured 1.5e-6 s), where the ball rests."""
+    h0, e = 0.2, 0.5
+    mech = cd.Mechanism(
+        "ball", ground={"O": (0.0, 0.0)},
+        bodies=[cd.Body("ball", 0.1, 1e-5, points={"B": (0, 0)}, guess=(0.0, h0, 0.0))],
+        joints=[cd.Joint("G", "prismatic", "ground.O", "ball.B", axis=(0.0, 1.0)),
+                cd.Joint("K", "contact", "ground.O", "ball.B", unilateral=True,
+                         restitution=e, curve=cd.Curve("line", direction=(1.0, 0.0)))],
+        initial=cd.Initial(joints={"G": h0}))
+    res = cd.run_dae(mech, 1.0, rtol=1e-10)
+    t1 = math.sqrt(2 * h0 / G)
+    bounces = [x for x in res.events if x.kind == "bounce"]
+    assert len(bounces) >= 10 and res.events[-1].kind == "landing"
+    ref = t1 * np.r_[1.0, 1.0 + 2 * np.cumsum(e ** np.arange(1, len(bounces)))]
+    assert np.max(np.abs(np.array([x.t for x in bounces]) - ref)) <= 1e-8
+    for x in bounces:
+        assert x.velocity_after == pytest.approx(-e * x.velocity_before, rel=1e-9)
+    t_lim = t1 * (1 + e) / (1 - e)
+    assert bounces[-1].t < res.events[-1].t < t_lim
+    assert t_lim - res.events[-1].t <= 1e-5
+    assert res.joint("G").position[-1] == pytest.approx(0.0, abs=1e-12)
+
+
+# ------------------------------------------------------------------ the file format
+CAM_FILE = """
+[mechanism]
+name = "cam"
+[ground.points]
+O = [0.0, 0.0]
+[bodies.cam]
+mass = 1.0
+inertia = 1e-3
+centroid = [0.01, 0.0]
+points = { O = [0.0, 0.0], C = [0.01, 0.0] }
+[bodies.follower]
+mass = 0.2
+inertia = 1e-4
+points = { tip = [0.0, 0.0] }
+guess = [0.0, 0.05, 0.0]
+[joints.A]
+type = "revolute"
+connects = ["ground.O", "cam.O"]
+[joints.F]
+type = "prismatic"
+connects = ["ground.O", "follower.tip"]
+axis = [0.0, 1.0]
+[joints.K]
+type = "contact"
+connects = ["cam.C", "follower.tip"]
+curve = { kind = "circle", radius = 0.04 }
+unilateral = true
+[drivers.A]
+motion = "constant_speed"
+initial = 0.0
+speed = 40.0
+[initial]
+joints = { K = 0.0 }
+velocities = { K = 0.0 }
+"""
+
+
+def test_contact_from_a_file_runs_as_built_in_python(tmp_path):
+    f = tmp_path / "cam.toml"
+    f.write_text(CAM_FILE)
+    mech = cd.load(f)
+    j = mech.joints["K"]
+    assert (j.type, j.curve, j.side, j.unilateral) == ("contact", cd.Curve("circle", 0.04),
+                                                       "outside", True)
+    assert mech.limited_joints == ["K"] and j.stops == cd.Limits(lower=0.0)
+    a = cd.run_dae(mech, 0.3, rtol=1e-10)
+    b = cd.run_dae(cam_mechanism(), 0.3, rtol=1e-10)
+    assert [e.kind for e in a.events] == [e.kind for e in b.events]
+    assert max(abs(x.t - y.t) for x, y in zip(a.events, b.events, strict=True)) <= 1e-12
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('curve = { kind = "circle", radius = 0.04 }\n', "",
+     r"\[joints\.K\] curve: missing"),
+    ('kind = "circle"', 'kind = "circel"', r"\[joints\.K\.curve\] kind: expected one of "
+     r"circle, line, got 'circel'; did you mean 'circle'\?"),
+    ("radius = 0.04", "radius = -0.04", r"\[joints\.K\] curve\.radius: expected a radius > 0"),
+    ("unilateral = true", 'unilateral = "yes"', r"\[joints\.K\] unilateral: expected true "
+     "or false"),
+    ("unilateral = true", "unilateral = true\nlimits = { lower = 0.0 }",
+     r"\[joints\.K\] limits: a unilateral contact's stop is its curve"),
+    ("unilateral = true", "unilateral = true\nfriction = { kinetic = 0.1, static = 0.1 }",
+     r"\[joints\.K\] friction: friction in a contact joint is not supported yet"),
+    ('connects = ["ground.O", "cam.O"]', 'connects = ["ground.O", "cam.O"]\nside = "inside"',
+     r"\[joints\.A\] side: only a contact joint has this key"),
+    ("unilateral = true", 'unilateral = true\nside = "above"',
+     r"\[joints\.K\] side: expected one of outside, inside, got 'above'"),
+    ("unilateral = true", "unilateral = true\naxis = [1.0, 0.0]",
+     r"\[joints\.K\] axis: only a prismatic joint has this key"),
+])
+def test_contact_file_errors(tmp_path, old, new, message):
+    assert old in CAM_FILE
+    f = tmp_path / "bad.toml"
+    f.write_text(CAM_FILE.replace(old, new))
+    with pytest.raises(cd.ModelError, match=message) as err:
+        cd.load(f)
+    assert "bad.toml" in str(err.value)
+
+
+def test_a_unilateral_contact_cannot_be_driven():
+    mech = cam_mechanism()
+    with pytest.raises(cd.ModelError, match=r"\[drivers\.K\].*unilateral contact"):
+        mech.replace(drivers={**mech.drivers, "K": cd.Driver("K")})
