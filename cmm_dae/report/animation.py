@@ -2,9 +2,10 @@
 
 Bodies are drawn as polygons through their points, ground points as triangles, the guide
 of each prismatic joint as a grey line with its stops as bars, the stops of a limited
-revolute joint as dashed rays (where the second body's link lies at each limit), and every
-metamorphic joint as a square, red while locked and green while free. The artists are
-created once and only moved from frame to frame.
+revolute joint as dashed rays (where the second body's link lies at each limit), the curve
+of each contact joint (a circle, or the stretch of a line the point runs on) as a brown
+line, and every metamorphic joint as a square, red while locked and green while free. The
+artists are created once and only moved from frame to frame.
 """
 
 from __future__ import annotations
@@ -52,7 +53,9 @@ class _Scene:
         self.guides = [self._guide(j) for j in meta.get("axes", {})]
         self.rays = [r for j in meta.get("limits", {}) if j not in meta.get("axes", {})
                      for r in self._rays(j)]
-        self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides])
+        self.curves = [self._curve(j) for j in meta.get("curves", {})]
+        self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides]
+                     + [c.reshape(-1, 2) for c in self.curves])
 
     def _extent(self, pts: list[np.ndarray]) -> None:
         allpts = np.vstack(pts)
@@ -99,6 +102,32 @@ class _Scene:
                 for v in (lo, up) if v is not None]
         return line, (np.stack(bars, axis=1) if bars else np.zeros((self.idx.size, 0, 2, 2)))
 
+    def _curve(self, j: str) -> np.ndarray:
+        """A contact joint's curve (frames, n, 2): its circle, or its line over the stretch
+        the point runs on (and its limits), drawn from the first body's frame."""
+        meta = self.res.meta
+        cv = meta["curves"][j]
+        b1, p1 = meta["connects"][j][0].split(".", 1)
+        b2, p2 = meta["connects"][j][1].split(".", 1)
+        o = np.asarray(self._local(b1, p1) if b1 != "ground" else meta["ground"][p1], float)
+        if cv["kind"] == "circle":
+            ang = np.linspace(0.0, 2.0 * math.pi, 73)
+            local = o + cv["radius"] * np.column_stack([np.cos(ang), np.sin(ang)])
+        else:
+            u = np.asarray(cv["direction"], float) / np.hypot(*cv["direction"])
+            # the point's place along the line, read in the first body's frame
+            P = self.world(b2, self._local(b2, p2)) - self.world(b1, self._local(b1, p1))
+            th = self.angle(b1)
+            s = np.cos(th) * (P @ u) + np.sin(th) * (P[:, 1] * u[0] - P[:, 0] * u[1])
+            ends = [float(s.min()), float(s.max())] + [
+                v for v in meta.get("limits", {}).get(j, []) if v is not None]
+            a, b = min(ends), max(ends)
+            pad = 0.15 * (b - a) if b > a else 0.05 * self.size
+            local = o + np.outer([a - pad, b + pad], u)
+        if b1 == "ground":
+            return np.broadcast_to(local, (self.idx.size, *local.shape))
+        return np.stack([self.world(b1, xy) for xy in local], axis=1)
+
     def _rays(self, j: str) -> list[np.ndarray]:
         """Dashed rays (frames, 2, 2): where the second body's link lies at each limit."""
         meta = self.res.meta
@@ -140,6 +169,8 @@ class _Scene:
         bar_lines = [[ax.plot([], [], "-", color="0.1", lw=4, zorder=2)[0]
                       for _ in range(bars.shape[1])] for _, bars in self.guides]
         ray_lines = [ax.plot([], [], "--", color="0.4", lw=1)[0] for _ in self.rays]
+        curve_lines = [ax.plot([], [], "-", color="saddlebrown", lw=2, zorder=2)[0]
+                       for _ in self.curves]
         body_lines = {b: ax.plot([], [], "-o", lw=3, ms=4, label=b, zorder=3)[0]
                       for b in self.tracks}
         marks = {j: ax.plot([], [], "s", ms=11, mfc="none", mew=2.5, zorder=4)[0]
@@ -167,10 +198,13 @@ class _Scene:
                     bl.set_data(bars[k, m, :, 0], bars[k, m, :, 1])
             for line, ray in zip(ray_lines, self.rays, strict=True):
                 line.set_data(ray[k, :, 0], ray[k, :, 1])
+            for line, cv in zip(curve_lines, self.curves, strict=True):
+                line.set_data(cv[k, :, 0], cv[k, :, 1])
             for j, mk in marks.items():
                 mk.set_data([self.markers[j][k, 0]], [self.markers[j][k, 1]])
                 mk.set_color("red" if j in cfg.locked else "green")
-            return [title, *body_lines.values(), *guide_lines, *ray_lines, *marks.values(),
+            return [title, *body_lines.values(), *guide_lines, *ray_lines, *curve_lines,
+                    *marks.values(),
                     *(b for bl in bar_lines for b in bl)]
 
         return fig, update

@@ -240,4 +240,9 @@ def _meta(model: Model) -> dict:
         "axes": {n: list(j.axis) for n, j in mech.joints.items() if j.type == "prismatic"},
         "limits": {n: [j.limits.lower, j.limits.upper] for n, j in mech.joints.items()
                    if j.limits is not None},
+        # and the curves of contact joints, in their first body's frame
+        "curves": {n: {"kind": j.curve.kind, "radius": j.curve.radius,
+                       "direction": list(j.curve.direction), "side": j.side,
+                       "unilateral": j.unilateral}
+                   for n, j in mech.joints.items() if j.type == "contact"},
     }
