@@ -17,6 +17,7 @@ from .joint_checks import (  # noqa: F401 (the names the description may use)
     SIDES,
     _check_ref,
     _finite,
+    gear_problems,
     joint_problems,
 )
 
@@ -59,8 +60,9 @@ def non_finite(m: Any) -> list[Problem]:
     out: list[Problem] = []
     tables = [("mechanism", "gravity", m.gravity), ("ground", "", m.ground),
               ("initial", "", m.initial)]
-    for kind in ("bodies", "joints", "drivers", "loads", "elements"):
-        tables += [(f"{kind}.{name}", "", rec) for name, rec in getattr(m, kind).items()]
+    for kind in ("bodies", "joints", "drivers", "loads", "elements", "gears"):
+        tables += [(f"{'joints' if kind == 'gears' else kind}.{name}", "", rec)
+                   for name, rec in getattr(m, kind).items()]
     for table, key, rec in tables:
         for k, val in _numbers(rec, key):
             if not math.isfinite(val):
@@ -77,7 +79,7 @@ def validate(m: Any) -> list[Problem]:
         out.append(Problem("mechanism", "gravity", f"expected two finite numbers, got {m.gravity}"))
     if not m.bodies:
         out.append(Problem("bodies", "", "a mechanism needs at least one body"))
-    for kind in ("bodies", "joints", "drivers", "loads", "elements"):
+    for kind in ("bodies", "joints", "drivers", "loads", "elements", "gears"):
         for name in getattr(m, kind):  # a dotted path (body.point, a parameter) splits at '.'
             if not isinstance(name, str) or not name or "." in name:
                 out.append(Problem(f"{kind}.{name}", "", "a name must be a non-empty word "
@@ -134,6 +136,8 @@ def validate(m: Any) -> list[Problem]:
                 out.append(Problem(t, key, f"expected a number >= 0, got {val}"))
         if not _finite(el.preload):
             out.append(Problem(t, "preload", f"expected a finite number, got {el.preload}"))
+    for name, gr in m.gears.items():
+        out += gear_problems(m, f"joints.{name}", gr)
     _check_initial(m, out)
     said = {(p.table, p.key.split("[")[0]) for p in out}
     return out + [p for p in non_finite(m) if (p.table, p.key.split("[")[0]) not in said]

@@ -131,3 +131,51 @@ def _contact_problems(t: str, j) -> list[Problem]:
     return out
 
 
+
+
+def gear_problems(m: Any, t: str, g: Any) -> list[Problem]:
+    """A gear pair (table ``t``): two existing joints, revolute-revolute (an external
+    mesh, ratio < 0) or revolute-prismatic, on one carrier, in a finite non-zero ratio."""
+    out: list[Problem] = []
+    if g.name in m.joints:
+        out.append(Problem(t, "", "a gear pair and a joint share this name"))
+    types = []
+    for ref in (g.first, g.second):
+        j = m.joints.get(ref)
+        if j is None:
+            out.append(Problem(t, "connects", f"unknown joint '{ref}' (a gear pair connects "
+                               f"two joints; joints: {', '.join(m.joints) or 'none'})"))
+        elif j.type not in ("revolute", "prismatic"):
+            out.append(Problem(t, "connects", f"joint '{ref}' is a {j.type} joint; a gear "
+                               "pair connects revolute or prismatic joints"))
+        else:
+            types.append(j.type)
+    if len(types) < 2:
+        return out
+    if g.first == g.second:
+        out.append(Problem(t, "connects", "connects a joint to itself"))
+    first, second = m.joints[g.first], m.joints[g.second]
+    for j in (first, second):
+        if j.second_body == GROUND:
+            out.append(Problem(t, "connects", f"joint '{j.name}' has the ground as its second "
+                               "body: a gear pair's joints carry their gears second"))
+    if types == ["prismatic", "prismatic"]:
+        out.append(Problem(t, "connects", "two prismatic joints: a gear pair needs a "
+                           "revolute joint (a pinion) on at least one side"))
+    if first.first_body != second.first_body:
+        out.append(Problem(t, "connects", f"joints '{g.first}' and '{g.second}' hold their "
+                           f"gears on different bodies ('{first.first_body}', "
+                           f"'{second.first_body}'): both must be on one carrier (or the "
+                           "ground), their first body"))
+    if not (_finite(g.ratio) and g.ratio != 0.0):
+        out.append(Problem(t, "ratio", f"expected a finite non-zero ratio, got {g.ratio}"))
+    elif types == ["revolute", "revolute"] and g.ratio > 0:
+        out.append(Problem(t, "ratio", f"expected a negative ratio (an external mesh turns "
+                           f"the gears opposite ways), got {g.ratio}; internal gears are "
+                           "not supported yet"))
+    if not (_finite(g.pressure_angle) and 0.0 <= g.pressure_angle < 1.2):
+        out.append(Problem(t, "pressure_angle", "expected an angle in [0, 1.2) rad, got "
+                           f"{g.pressure_angle}"))
+    if not _finite(g.offset):
+        out.append(Problem(t, "offset", f"expected a finite number, got {g.offset}"))
+    return out

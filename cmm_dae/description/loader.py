@@ -18,7 +18,7 @@ from typing import Any
 from ..core.errors import ModelError, Problem
 from . import schema
 from .checks import JOINT_TYPES
-from .contact_keys import contact_keys
+from .higher_pairs import contact_keys, is_gear, read_gear
 from .mechanism import (
     LAWS,
     MOTIONS,
@@ -217,7 +217,9 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
         ground[k] = r.vec("ground.points", {k: v}, k, 2)
 
     bodies = [_body(r, k, v) for k, v in r.sub("", data, "bodies").items()]
-    joints = [_joint(r, k, v) for k, v in r.sub("", data, "joints").items()]
+    jt = r.sub("", data, "joints")
+    joints = [_joint(r, k, v) for k, v in jt.items() if not is_gear(v)]
+    gears = [read_gear(r, k, v) for k, v in jt.items() if is_gear(v)]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
     loads = [_load(r, k, v) for k, v in r.sub("", data, "loads").items()]
     elements = [_element(r, k, v) for k, v in r.sub("", data, "elements").items()]
@@ -244,7 +246,7 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
         # without validating, then report only what the reader did not already say.
         m = Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
                       initial=Initial(ij, iv, eq), gravity=gravity, source=source, loads=loads,
-                      elements=elements, check=False)
+                      elements=elements, gears=gears, check=False)
         seen = {(p.table, p.key.split("[")[0]) for p in problems}
         problems += [p for p in validate(m) if (p.table, p.key) not in seen
                      and (p.table, p.key.split(".")[0]) not in seen]

@@ -6,20 +6,20 @@ of its own frame, the frame its ``points`` and ``centroid`` are written in.
 
 from __future__ import annotations
 
-import math
 import os
-from collections.abc import Callable
 from dataclasses import InitVar, dataclass, field
 from types import MappingProxyType
 from typing import Literal
 
 from ..core.errors import ModelError, Problem
 from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
+from .laws import Driver, Law, Zone
+from .parts import Curve, Damper, Friction, Gear, Limits, Spring
 
 __all__ = [
     "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Curve", "Damper",
-    "Driver", "Element", "Friction", "Initial", "Joint", "Law", "Limits", "Load", "Mechanism",
-    "Spring", "Zone", "require_mechanism", "validate",
+    "Driver", "Element", "Friction", "Gear", "Initial", "Joint", "Law", "Limits", "Load",
+    "Mechanism", "Spring", "Zone", "require_mechanism", "validate",
 ]
 
 
@@ -77,32 +77,6 @@ class Body:
         return cls(name, mass, inertia - mass * d2, centroid, **kw)
 
 
-@dataclass(frozen=True)
-class Limits:
-    """Extreme positions of a joint coordinate (rad or m); either side may be None."""
-
-    lower: float | None = None
-    upper: float | None = None
-
-
-@dataclass(frozen=True)
-class Spring:
-    """Linear spring on a joint coordinate: force -stiffness (c - rest).
-
-    stiffness in N m/rad (revolute) or N/m (prismatic); rest in rad or m.
-    """
-
-    stiffness: float
-    rest: float = 0.0
-
-
-@dataclass(frozen=True)
-class Damper:
-    """Linear damper on a joint coordinate rate: N m s/rad or N s/m."""
-
-    damping: float
-
-
 class _TwoPoints:
     """Bodies of a ``first``/``second`` pair of "body.point" references."""
 
@@ -116,47 +90,6 @@ class _TwoPoints:
     @property
     def second_body(self) -> str:
         return self.second.split(".", 1)[0]
-
-
-@dataclass(frozen=True)
-class Friction:
-    """Dry friction in a joint: it sticks while the force it must carry stays within its
-    static level and slides against its kinetic level.
-
-    Each level is a constant (``static``, ``kinetic``: N for a prismatic joint, N m for a
-    revolute one) plus a part proportional to the joint's reaction (``mu_static``,
-    ``mu_kinetic``, dimensionless): ``mu * radius * |F|`` on a revolute joint (F its
-    reaction force, ``radius`` the pin's radius in m), ``mu * |N|`` on a prismatic joint (N
-    the guide's normal reaction). The reaction and the friction it causes are solved
-    together. static >= kinetic >= 0, mu_static >= mu_kinetic >= 0."""
-
-    static: float = 0.0
-    kinetic: float = 0.0
-    mu_static: float = 0.0
-    mu_kinetic: float = 0.0
-    radius: float = 0.0
-
-    @property
-    def from_reaction(self) -> bool:
-        """Whether the levels grow with the joint's reaction."""
-        return self.mu_static > 0.0 or self.mu_kinetic > 0.0
-
-
-@dataclass(frozen=True)
-class Curve:
-    """The curve of a contact joint, in its first body's frame, through the first
-    connect point (its origin).
-
-    kind : {"circle", "line"}
-        ``circle``: centred on the origin point, of ``radius`` (m); its arc length is
-        measured counter-clockwise from the body's x axis, ``radius * atan2`` in
-        (-pi radius, pi radius]. ``line``: through the origin point along ``direction``
-        (normalised on use); its arc length is the distance along it from the origin.
-    """
-
-    kind: Literal["circle", "line"] = "circle"
-    radius: float = 0.0
-    direction: Vec2 = (1.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -232,80 +165,6 @@ class Joint(_TwoPoints):
         if self.type == "contact" and self.unilateral:
             return Limits(lower=0.0)
         return self.limits
-
-
-@dataclass(frozen=True)
-class Driver:
-    """Prescribed motion of a joint coordinate (one driver per driven joint).
-
-    motion : {"constant_speed", "polynomial", "harmonic", "table"}
-        ``constant_speed``: ``initial + speed t``; ``polynomial``: ``sum c_k t^k``;
-        ``harmonic``: ``initial + amplitude sin(2 pi frequency t + phase)``;
-        ``table``: C2 cubic spline through ``times``/``values`` with zero end slopes,
-        held at the last value after the last time.
-    Units: rad, rad/s, Hz, s (m, m/s for a prismatic joint).
-    """
-
-    joint: str
-    motion: str = "constant_speed"
-    initial: float = 0.0
-    speed: float = 0.0
-    coefficients: tuple[float, ...] = ()
-    amplitude: float = 0.0
-    frequency: float = 0.0
-    phase: float = 0.0
-    times: tuple[float, ...] = ()
-    values: tuple[float, ...] = ()
-
-    def value0(self) -> float:
-        """Coordinate at t = 0."""
-        if self.motion == "constant_speed":
-            return self.initial
-        if self.motion == "polynomial":
-            return self.coefficients[0] if self.coefficients else 0.0
-        if self.motion == "harmonic":
-            return self.initial + self.amplitude * math.sin(self.phase)
-        return self.values[0]
-
-
-@dataclass(frozen=True)
-class Law:
-    """A scalar law of a load: of time, and for ``motor`` of the loaded joint's rate.
-
-    kind : {"constant", "polynomial", "harmonic", "table", "motor"}
-        ``constant``: ``value``; ``polynomial``: ``sum coefficients[k] t^k``;
-        ``harmonic``: ``mean + amplitude sin(2 pi frequency t + phase)``;
-        ``table``: C2 cubic spline through ``times``/``values`` (zero end slopes), held at
-        the last value after the last time; ``motor``: ``stall (1 - rate / no_load_speed)``
-        with the rate of the loaded joint (a motor's torque-speed line).
-    func : callable or None
-        From Python only: ``func(t, coordinate, rate) -> float`` replaces the law (its
-        derivatives are taken by finite differences); never a string.
-    Units: those of the load (N, N m), s, Hz, rad.
-    """
-
-    kind: str = "constant"
-    value: float = 0.0
-    coefficients: tuple[float, ...] = ()
-    mean: float = 0.0
-    amplitude: float = 0.0
-    frequency: float = 0.0
-    phase: float = 0.0
-    times: tuple[float, ...] = ()
-    values: tuple[float, ...] = ()
-    stall: float = 0.0
-    no_load_speed: float = 0.0
-    func: Callable[[float, float, float], float] | None = field(default=None, compare=False)
-
-
-@dataclass(frozen=True)
-class Zone:
-    """Where a load acts: while joint ``joint`` (default: the loaded joint) lies in
-    [``lower``, ``upper``] (rad or m; either may be None, open on that side)."""
-
-    joint: str | None = None
-    lower: float | None = None
-    upper: float | None = None
 
 
 @dataclass(frozen=True)
@@ -395,6 +254,7 @@ class Mechanism:
     source: str | None = None
     loads: MappingProxyType = field(default_factory=lambda: _frozen({}))
     elements: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    gears: MappingProxyType = field(default_factory=lambda: _frozen({}))
     check: InitVar[bool] = True
 
     def __post_init__(self, check: bool) -> None:
@@ -422,6 +282,7 @@ class Mechanism:
         object.__setattr__(self, "drivers", as_map(self.drivers, "joint", "drivers"))
         object.__setattr__(self, "loads", as_map(self.loads, "name", "loads"))
         object.__setattr__(self, "elements", as_map(self.elements, "name", "elements"))
+        object.__setattr__(self, "gears", as_map(self.gears, "name", "gears"))
         object.__setattr__(self, "ground", _frozen(
             {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
         object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
@@ -432,14 +293,14 @@ class Mechanism:
     def __reduce__(self):
         return (_rebuild, (self.name, dict(self.bodies), dict(self.joints), dict(self.ground),
                            dict(self.drivers), self.initial, self.gravity, self.source,
-                           dict(self.loads), dict(self.elements)))
+                           dict(self.loads), dict(self.elements), dict(self.gears)))
 
     def replace(self, **changes) -> Mechanism:
         """A copy with some fields replaced (``bodies=``, ``loads=``, ...), validated."""
         kw = dict(name=self.name, bodies=dict(self.bodies), joints=dict(self.joints),
                   ground=dict(self.ground), drivers=dict(self.drivers), initial=self.initial,
                   gravity=self.gravity, source=self.source, loads=dict(self.loads),
-                  elements=dict(self.elements))
+                  elements=dict(self.elements), gears=dict(self.gears))
         kw.update(changes)
         return Mechanism(**kw)
 
@@ -480,10 +341,10 @@ def require_mechanism(obj: object, caller: str) -> None:
 
 
 def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source, loads=None,
-             elements=None) -> Mechanism:
+             elements=None, gears=None) -> Mechanism:
     """Unpickling: the description was validated when it was first built."""
     return Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
                      initial=initial, gravity=gravity, source=source, loads=loads or {},
-                     elements=elements or {}, check=False)
+                     elements=elements or {}, gears=gears or {}, check=False)
 
 

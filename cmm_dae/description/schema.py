@@ -100,11 +100,21 @@ SPEC: dict[str, Table] = {
         "type": Key("choice", "revolute: coordinate theta_second - theta_first; prismatic: "
                     "displacement of the second point from the first along `axis`; contact: "
                     "the second point on a `curve` of the first body (a higher pair), "
-                    "coordinate its arc length (bilateral) or its gap (unilateral)",
-                    choices=JOINT_TYPES),
-        "connects": Key("pair", "[\"body.point\", \"body.point\"]: the first and the second "
-                        "body and their points (`ground.X` for a ground point; a contact's "
-                        "curve passes through the first point)"),
+                    "coordinate its arc length (bilateral) or its gap (unilateral); gear: "
+                    "two joints' coordinates in a fixed `ratio` (gears, rack and pinion)",
+                    choices=JOINT_TYPES + ("gear",)),
+        "connects": Key("strings2", "[\"body.point\", \"body.point\"]: the first and the "
+                        "second body and their points (`ground.X` for a ground point; a "
+                        "contact's curve passes through the first point); a gear pair: "
+                        "[\"JOINT\", \"JOINT\"], its two joints"),
+        "ratio": Key("number", "gear only: rate of the second joint / rate of the first "
+                     "(< 0 for two gears in external mesh; +- the pitch radius for a rack)",
+                     "rad/rad, m/rad or rad/m", default=None),
+        "pressure_angle": Key("number", "gear only: the line of action's angle from the "
+                              "pitch circles' tangent (the tooth force is reported along it)",
+                              "rad", minimum=0.0, default=0.3490658503988659),
+        "offset": Key("number", "gear only: the second joint's coordinate where the first's "
+                      "is 0", _COORD, default=0.0),
         "axis": Key("vector2", "prismatic only: sliding direction in the first body's frame",
                     default=[1.0, 0.0]),
         "angle": Key("number", "prismatic only: the relative angle theta_second - "
@@ -253,6 +263,8 @@ def _json(k: Key) -> dict:
         s = {"type": "array", "items": num, "minItems": n, "maxItems": n}
     elif k.kind == "numbers":
         s = {"type": "array", "items": num}
+    elif k.kind == "strings2":
+        s = {"type": "array", "items": {"type": "string"}, "minItems": 2, "maxItems": 2}
     elif k.kind == "pair":
         s = {"type": "array", "items": {"type": "string", "pattern": r"^[^.]+\..+$"},
              "minItems": 2, "maxItems": 2}
@@ -328,7 +340,8 @@ def _type_text(k: Key) -> str:
     return {"number": "number", "string": "string", "vector2": "[x, y]",
             "vector3": "[x, y, theta]", "boolean": "true \\| false",
             "numbers": "list of numbers",
-            "pair": "two strings", "paths": "\"position\" or list of strings",
+            "pair": "two strings", "strings2": "two strings",
+            "paths": "\"position\" or list of strings",
             "table": "inline table", "map": f"table of name = {k.of.replace('vector2', '[x, y]')}",
             "choice": " \\| ".join(f"`{c}`" for c in k.choices)}[k.kind]
 

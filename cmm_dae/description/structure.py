@@ -242,7 +242,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
     """
     joints = mech.joints
     metamorphic = set(mech.limited_joints)
-    mobility = 3 * len(mech.bodies) - _cost(mech, joints)
+    mobility = 3 * len(mech.bodies) - _cost(mech, joints) - len(mech.gears)
     known = {GROUND}
     active = []
     changed = True
@@ -380,7 +380,8 @@ def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET
     a bounded search, so labels never cost more than a small fixed budget."""
     force = force_constraint_joints(mech)
     # a unilateral contact holds no row until it lands (a lock, as a stop's)
-    mobility = 3 * len(mech.bodies) - sum(j.rows for j in mech.joints.values())
+    mobility = 3 * len(mech.bodies) - sum(j.rows for j in mech.joints.values()) \
+        - len(mech.gears)
     cache: list[Structure] = []
 
     def label(locked: dict[str, str]) -> tuple[str, int]:

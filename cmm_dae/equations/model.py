@@ -207,6 +207,11 @@ class Model:
         c = ca.vertcat(*coords)
         jidx = {n: i for i, n in enumerate(self.joint_names)}
         self.jidx = jidx
+        # Gear pairs: two joints' coordinates in a fixed ratio (one row each, a joint row
+        # in all but its label: it may be redundant, e.g. in a closed gear train)
+        for name, gr in smech.gears.items():
+            rows.append(c[jidx[gr.second]] - gr.ratio * c[jidx[gr.first]] - gr.offset)
+            self.rows.append(Row("gear", name))
         for name, d in smech.drivers.items():
             rows.append(c[jidx[name]] - driver_expr(d, t))
             self.rows.append(Row("driver", name))

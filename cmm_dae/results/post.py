@@ -14,6 +14,7 @@ from ..description.mechanism import GROUND
 from ..equations.kkt import batch as batch_kkt
 from ..equations.model import Model
 from ..equations.reaction import level
+from .gears import tooth_forces
 from .result import Configuration, Event, Result, Stats
 
 
@@ -89,7 +90,9 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
             F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
             jforce[:, k] = -F
             jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
+    gforce = tooth_forces(model, q, pts, lam, jforce, jtorque)
     return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce,
+            "gforce": gforce,
             "jtorque": jtorque, "drift_pos": drift_pos, "drift_vel": drift_vel,
             "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
             "load_value": extras[3], "load_power": extras[4]}
@@ -169,6 +172,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
         ser = {"a": np.zeros((0, model.nq)), "lam": np.zeros((0, len(model.all_rows))),
                "c": np.zeros((0, nj)), "cd": np.zeros((0, nj)), "cdd": np.zeros((0, nj)),
                "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
+               "gforce": np.zeros((0, len(model.mech.gears), 2)),
                "drift_pos": np.zeros(0), "drift_vel": np.zeros(0),
                **{k: np.zeros((0, ne)) for k in ("elem_len", "elem_rate", "elem_tension")},
                **{k: np.zeros((0, nld)) for k in ("load_value", "load_power")}}
@@ -199,6 +203,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
     data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
             "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],
             "cdd": ser["cdd"], "jforce": ser["jforce"], "jtorque": ser["jtorque"],
+            "gforce": ser["gforce"],
             "effort": effort, "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
             "friction": friction,
             **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
@@ -231,6 +236,7 @@ def _meta(model: Model) -> dict:
         "elements": {n: [e.stiffness, e.rest, e.damping, e.preload]
                      for n, e in mech.elements.items()},
         "loads": model.load_names,
+        "gears": list(mech.gears),
         "frictional": model.frictional,
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},

@@ -56,6 +56,18 @@ class ElementSeries:
 
 
 @dataclass(frozen=True)
+class GearSeries:
+    """A gear pair: the tooth ``force`` (n, 2) N, global axes, of the first joint's gear on
+    the second's, along the line of action; its ``magnitude`` (n,) N."""
+
+    force: np.ndarray
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        return np.hypot(self.force[:, 0], self.force[:, 1])
+
+
+@dataclass(frozen=True)
 class LoadSeries:
     """An applied load: ``value`` (n,) N or N m (zero while outside its zone) and the
     ``power`` (n,) W it puts into the mechanism."""
@@ -183,6 +195,10 @@ class Result:
         fr = d["friction"][:, k] if "friction" in d else np.zeros(self.t.size)
         return JointSeries(d["c"][:, k], d["cd"][:, k], d["cdd"][:, k], d["jforce"][:, k, :],
                            d["jtorque"][:, k], fr)
+
+    def gear(self, name: str) -> GearSeries:
+        """Time series of gear pair ``name`` (its tooth force)."""
+        return GearSeries(self.data["gforce"][:, self._index("gears", name), :])
 
     def element(self, name: str) -> ElementSeries:
         """Time series of force element ``name``."""

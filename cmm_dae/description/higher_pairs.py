@@ -1,12 +1,12 @@
-"""Reading a contact joint's own keys from a model file (its curve, side and
-``unilateral``), for :mod:`.loader`."""
+"""Reading the higher pairs of a model file for :mod:`.loader`: a contact joint's own keys
+(its curve, side and ``unilateral``) and a gear pair (``type = "gear"``)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from .checks import CURVES, SIDES
-from .mechanism import Curve
+from .mechanism import Curve, Gear
 from .schema import default, keys_of
 
 
@@ -22,6 +22,9 @@ def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str
         for k in ("curve", "side", "unilateral"):
             if k in d:
                 r.bad(t, k, "only a contact joint has this key")
+    for k in ("ratio", "pressure_angle", "offset"):
+        if k in d:
+            r.bad(t, k, "only a gear pair (type = \"gear\") has this key")
     curve = None
     if "curve" in d:
         ct = r.keys(f"{t}.curve", r.sub(t, d, "curve"), keys_of("joints", "curve"))
@@ -40,3 +43,22 @@ def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str
             r.bad(t, "unilateral", f"expected true or false, got {unilateral!r:.40}")
             unilateral = False
     return curve, side, unilateral
+
+
+def is_gear(d: Any) -> bool:
+    """Whether a ``[joints.NAME]`` table describes a gear pair."""
+    return isinstance(d, dict) and d.get("type") == "gear"
+
+
+def read_gear(r: Any, name: str, d: dict) -> Gear:
+    """The gear pair of table ``joints.NAME`` (keys checked, each problem noted in ``r``)."""
+    t = f"joints.{name}"
+    d = r.keys(t, d, ("type", "connects", "ratio", "pressure_angle", "offset"))
+    conn = d.get("connects")
+    if not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str)
+                                                              for c in conn)):
+        r.bad(t, "connects", f"expected two joint names [\"A\", \"B\"], got {conn!r:.60}")
+        conn = ["", ""]
+    return Gear(name, conn[0], conn[1], r.num(t, d, "ratio"),
+                r.num(t, d, "pressure_angle", default("joints", "pressure_angle")),
+                r.num(t, d, "offset", default("joints", "offset")))

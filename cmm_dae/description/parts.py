@@ -1,0 +1,111 @@
+"""The parts of a joint's description: its limits, spring, damper, friction and a contact's
+curve, and the gear pair between two joints (frozen dataclasses, SI units)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = ["Curve", "Damper", "Friction", "Gear", "Limits", "Spring"]
+
+Vec2 = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Extreme positions of a joint coordinate (rad or m); either side may be None."""
+
+    lower: float | None = None
+    upper: float | None = None
+
+
+@dataclass(frozen=True)
+class Spring:
+    """Linear spring on a joint coordinate: force -stiffness (c - rest).
+
+    stiffness in N m/rad (revolute) or N/m (prismatic); rest in rad or m.
+    """
+
+    stiffness: float
+    rest: float = 0.0
+
+
+@dataclass(frozen=True)
+class Damper:
+    """Linear damper on a joint coordinate rate: N m s/rad or N s/m."""
+
+    damping: float
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Dry friction in a joint: it sticks while the force it must carry stays within its
+    static level and slides against its kinetic level.
+
+    Each level is a constant (``static``, ``kinetic``: N for a prismatic joint, N m for a
+    revolute one) plus a part proportional to the joint's reaction (``mu_static``,
+    ``mu_kinetic``, dimensionless): ``mu * radius * |F|`` on a revolute joint (F its
+    reaction force, ``radius`` the pin's radius in m), ``mu * |N|`` on a prismatic joint (N
+    the guide's normal reaction). The reaction and the friction it causes are solved
+    together. static >= kinetic >= 0, mu_static >= mu_kinetic >= 0."""
+
+    static: float = 0.0
+    kinetic: float = 0.0
+    mu_static: float = 0.0
+    mu_kinetic: float = 0.0
+    radius: float = 0.0
+
+    @property
+    def from_reaction(self) -> bool:
+        """Whether the levels grow with the joint's reaction."""
+        return self.mu_static > 0.0 or self.mu_kinetic > 0.0
+
+
+@dataclass(frozen=True)
+class Curve:
+    """The curve of a contact joint, in its first body's frame, through the first
+    connect point (its origin).
+
+    kind : {"circle", "line"}
+        ``circle``: centred on the origin point, of ``radius`` (m); its arc length is
+        measured counter-clockwise from the body's x axis, ``radius * atan2`` in
+        (-pi radius, pi radius]. ``line``: through the origin point along ``direction``
+        (normalised on use); its arc length is the distance along it from the origin.
+    """
+
+    kind: Literal["circle", "line"] = "circle"
+    radius: float = 0.0
+    direction: Vec2 = (1.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Gear:
+    """A gear pair or a rack and pinion: the coordinates of two joints in a fixed ratio,
+    ``c_second = ratio * c_first + offset`` (a higher pair, one constraint row).
+
+    Parameters
+    ----------
+    name : str
+        Name of the pair (a joint name in the model file: ``[joints.NAME]``, type "gear").
+    first, second : str
+        The two joints: both revolute (two gears on axles held by one carrier body, or
+        the ground: an external mesh, ``ratio`` < 0), or one revolute and one prismatic (a
+        pinion and its rack, on one carrier).
+    ratio : float
+        Rate of the second joint over the rate of the first: rad/rad for two gears
+        (-z_first / z_second), m/rad for a rack driven by its pinion (+- the pitch
+        radius), rad/m the other way round.
+    pressure_angle : float
+        Angle of the line of action from the pitch circles' common tangent, rad (default
+        20 degrees); the tooth force is reported along it.
+    offset : float
+        ``c_second`` where ``c_first`` is 0, rad or m.
+    """
+
+    name: str
+    first: str
+    second: str
+    ratio: float
+    pressure_angle: float = math.radians(20.0)
+    offset: float = 0.0
