@@ -97,8 +97,8 @@ def _friction_problems(t: str, j) -> list[Problem]:
         out.append(Problem(t, "friction.radius", "expected the pin radius > 0 (m): a "
                            "revolute joint's friction from its reaction is mu radius |F|, "
                            f"got radius = {f.radius}"))
-    if j.type == "prismatic" and f.radius != 0.0:
-        out.append(Problem(t, "friction.radius", "a prismatic joint's friction from its "
+    if j.type != "revolute" and f.radius != 0.0:
+        out.append(Problem(t, "friction.radius", f"a {j.type} joint's friction from its "
                            "reaction is mu |N|: it has no radius"))
     return out
 
@@ -125,9 +125,9 @@ def _contact_problems(t: str, j) -> list[Problem]:
     if j.unilateral and j.limits is not None:
         out.append(Problem(t, "limits", "a unilateral contact's stop is its curve (it lands "
                            "on it); limits on the arc length need a bilateral contact"))
-    if j.friction is not None:
-        out.append(Problem(t, "friction", "friction in a contact joint is not supported yet "
-                           "(put it on a revolute or prismatic joint)"))
+    if j.friction is not None and j.unilateral:
+        out.append(Problem(t, "friction", "friction in a unilateral contact is not supported "
+                           "yet (a bilateral one, a pin in a slot, can have it)"))
     return out
 
 

@@ -43,11 +43,12 @@ class Friction:
     """Dry friction in a joint: it sticks while the force it must carry stays within its
     static level and slides against its kinetic level.
 
-    Each level is a constant (``static``, ``kinetic``: N for a prismatic joint, N m for a
-    revolute one) plus a part proportional to the joint's reaction (``mu_static``,
-    ``mu_kinetic``, dimensionless): ``mu * radius * |F|`` on a revolute joint (F its
-    reaction force, ``radius`` the pin's radius in m), ``mu * |N|`` on a prismatic joint (N
-    the guide's normal reaction). The reaction and the friction it causes are solved
+    Each level is a constant (``static``, ``kinetic``: N for a prismatic or contact joint,
+    N m for a revolute one) plus a part proportional to the joint's reaction
+    (``mu_static``, ``mu_kinetic``, dimensionless): ``mu * radius * |F|`` on a revolute
+    joint (F its reaction force, ``radius`` the pin's radius in m), ``mu * |N|`` on a
+    prismatic joint (N the guide's normal reaction) or a bilateral contact (N the contact
+    force). The reaction and the friction it causes are solved
     together. static >= kinetic >= 0, mu_static >= mu_kinetic >= 0."""
 
     static: float = 0.0

@@ -277,7 +277,7 @@ class Model:
         for f, name in enumerate(self.frictional):
             if name not in self.reacting:
                 continue
-            if len(self.rows_of("joint", name)) != 2:
+            if len(self.rows_of("joint", name)) != mech.joints[name].rows:
                 raise ModelError(Problem(
                     f"joints.{name}", "friction", "grows with the joint's reaction, but "
                     "its constraint rows are redundant and leave the reaction undetermined; "

@@ -1,11 +1,13 @@
 """Friction from the reaction: a joint's friction levels grow with the load it carries.
 
 On a revolute joint the level is ``mu * radius * |F|`` (F the pin's reaction force), on a
-prismatic joint ``mu * |N|`` (N the guide's normal reaction), each added to the joint's
-constant level. The reaction is a combination of the joint's multipliers: a revolute
-joint's two rows hold its two points together in global x and y, so their multipliers
-are the force itself; a prismatic joint's second row holds the point on the guide's
-normal, so its multiplier is the normal force. The friction a slipping joint feels
+prismatic joint ``mu * |N|`` (N the guide's normal reaction), on a (bilateral) contact
+joint ``mu * |N|`` (N the contact force), each added to the joint's constant level. The
+reaction is a combination of the joint's multipliers: a revolute joint's two rows hold its
+two points together in global x and y, so their multipliers are the force itself; a
+prismatic joint's second row holds the point on the guide's normal, so its multiplier is
+the normal force; a contact's one row is the point's distance from its curve, so its
+multiplier is the contact force. The friction a slipping joint feels
 therefore depends on the multipliers it helps determine, and the KKT system becomes
 nonlinear: :func:`solve` corrects a linear solve by Newton's method, so that the reaction
 and the friction it causes are solved together, never with a lagged reaction.
@@ -37,23 +39,27 @@ def reacting(mech: Any) -> list[str]:
 
 
 def _rows(model: Any, joint: str) -> list[int]:
+    """The rows whose multipliers make the reaction friction grows with: a revolute
+    joint's two, a prismatic joint's normal one, a contact's one."""
+    j = model.mech.joints[joint]
     rows = model.rows_of("joint", joint)
-    if len(rows) != 2:  # (the model refuses this when it is built)
-        raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not 2")
-    return rows
+    if len(rows) != j.rows:  # (the model refuses this when it is built)
+        raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not {j.rows}")
+    return rows[1:] if j.type == "prismatic" else rows
 
 
 def magnitude(model: Any, joint: str, lam: Any) -> Any:
-    """|F| (revolute) or |N| (prismatic) of ``joint`` from the model's multipliers (N)."""
-    r = _rows(model, joint)
-    if model.mech.joints[joint].type == "revolute":
-        return (lam[r[0]] * lam[r[0]] + lam[r[1]] * lam[r[1]] + SMOOTH**2) ** 0.5
-    return (lam[r[1]] * lam[r[1]] + SMOOTH**2) ** 0.5
+    """|F| (revolute) or |N| (prismatic, contact) of ``joint`` from the model's
+    multipliers (N)."""
+    total = SMOOTH**2
+    for r in _rows(model, joint):
+        total = total + lam[r] * lam[r]
+    return total ** 0.5
 
 
 def arm(model: Any, joint: str, friction: Any = None) -> Any:
     """What mu multiplies besides the reaction: the pin's radius on a revolute joint (m),
-    1 on a prismatic one. ``friction`` (default the joint's) may hold symbols."""
+    1 on a prismatic or contact one. ``friction`` (default the joint's) may hold symbols."""
     f = model.mech.joints[joint].friction if friction is None else friction
     return f.radius if model.mech.joints[joint].type == "revolute" else 1.0
 
@@ -82,13 +88,10 @@ def level(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> 
 
 def _gradient(model: Any, joint: str, lam: np.ndarray) -> np.ndarray:
     """d magnitude / d lambda (m,)."""
-    r = _rows(model, joint)
     g = np.zeros(lam.size)
     mag = magnitude(model, joint, lam)
-    if model.mech.joints[joint].type == "revolute":
-        g[r[0]], g[r[1]] = lam[r[0]] / mag, lam[r[1]] / mag
-    else:
-        g[r[1]] = lam[r[1]] / mag
+    for r in _rows(model, joint):
+        g[r] = lam[r] / mag
     return g
 
 
