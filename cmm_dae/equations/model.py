@@ -1,21 +1,16 @@
 """The unified Newton-Euler model in absolute coordinates, built once with CasADi.
 
 Each body has ``q_i = (x, y, theta)`` of its centroid, so the mass matrix is constant and
-diagonal. Constraint rows, in this order:
+diagonal. The constraint rows (:func:`~.build.constraint_rows`): each joint's (2 for a
+revolute or prismatic joint, 1 for a bilateral contact, none for a unilateral one), each
+gear pair's, each driver's ``c(q) - f(t)``, and a lock row ``a_k (c(q) - L_k)`` for each
+joint that can lock, switched by the parameters ``p`` (``a_k`` = 1 locked, 0 free).
 
-* every joint: revolute ``r_P2 - r_P1`` (2 rows); prismatic ``theta2 - theta1 - angle`` and
-  ``n1 . (r_P2 - r_P1)`` (2 rows);
-* every driver: ``c(q) - f(t)`` (1 row);
-* every limited (metamorphic) joint: a lock row ``a_k (c(q) - L_k)`` switched by the
-  parameter vector ``p = [a_1..a_K, L_1..L_K]`` (``a_k`` = 1 locked, 0 free).
-
-The equations of motion are ``M q'' + Phi_q^T lambda = Q(q, q', t)``, the paper's Eq. (10) for
-all bodies at once; the multipliers are the physical constraint forces (the generalized force
-of a row on the bodies is ``-Phi_q^T lambda``). An inactive lock row gets the trivial
-equation ``lambda_k = 0`` (``mu_k = 0``), so every configuration shares one residual and one
-Jacobian.
-
-This is the only module besides ``dae`` that imports CasADi.
+The equations of motion are ``M q'' + Phi_q^T lambda = Q(q, q', t)``, the paper's Eq. (10)
+for all bodies at once; the multipliers are the physical constraint forces (a row's
+generalized force on the bodies is ``-Phi_q^T lambda``). An inactive lock row gets the
+trivial equation ``lambda_k = 0`` (``mu_k = 0``), so every configuration shares one
+residual and one Jacobian.
 """
 
 from __future__ import annotations
@@ -23,70 +18,25 @@ from __future__ import annotations
 import math
 import reprlib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 
 from ..core.errors import ModelError, Problem
-from ..description.mechanism import GROUND, Mechanism
+from ..description.mechanism import Mechanism
 from ..description.params import param_value, symbolic
-from . import kkt, reaction
+from . import build, kkt, reaction
+from .build import (  # noqa: F401 (model.Row and the records, as before)
+    Constraints,
+    JointCoords,
+    Row,
+    contact_gap_arc,
+)
 from .codegen import Buffered, compile_functions
-from .laws import driver_expr, law_expr
-from .reaction import reacting
 from .unknowns import Unknowns, ground_pins
 
 __all__ = ["Buffered", "Constraints", "JointCoords", "Model", "Row", "compile_functions"]
-
-
-def contact_gap_arc(j, d, theta1) -> tuple:
-    """A contact joint's gap (distance of the point from the curve on its ``side``, m) and
-    arc length (m) for ``d`` = point - curve origin (global, CasADi) and the first body's
-    angle ``theta1``. The gap is a distance, so its multiplier is the contact force (N)."""
-    dl = _rot(theta1).T @ d  # in the first body's frame, where the curve is given
-    c = j.curve
-    if c.kind == "circle":
-        r = ca.sqrt(ca.dot(dl, dl))
-        gap = r - c.radius
-        arc = c.radius * ca.atan2(dl[1], dl[0])
-    else:
-        u = np.array(c.direction, float) / math.hypot(*c.direction)
-        gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction
-        arc = u[0] * dl[0] + u[1] * dl[1]
-    return (gap if j.side == "outside" else -gap), arc
-
-
-def _rot(th):
-    c, s = ca.cos(th), ca.sin(th)
-    return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
-
-
-@dataclass(frozen=True)
-class Constraints:
-    """Constraint values at (q, t): ``phi`` (m,), ``Phi_q`` (m, nq), ``Phi_t`` (m,)."""
-
-    phi: np.ndarray
-    Phi_q: np.ndarray
-    Phi_t: np.ndarray
-
-
-@dataclass(frozen=True)
-class JointCoords:
-    """Joint coordinates ``c`` (nj,) in rad or m, their rates ``cdot`` (nj,) and the
-    Jacobian ``c_q`` (nj, nq), in the order of ``Model.joint_names``."""
-
-    c: np.ndarray
-    cdot: np.ndarray
-    c_q: np.ndarray
-
-
-@dataclass(frozen=True)
-class Row:
-    """One constraint row: what it belongs to (``joint``, ``driver`` or ``lock``) and whose."""
-
-    kind: str
-    name: str
 
 
 class Model:
@@ -130,39 +80,11 @@ class Model:
             if self.theta_paths else mech
         #: the mechanism with the parameters theta as symbols
         self.smech = smech
-        self.body_names = list(mech.bodies)
-        self.joint_names = list(mech.joints)
-        self.driver_names = list(mech.drivers)
-        #: joints with a lock row: on a stop (limits) or sticking (friction)
-        self.locks = mech.lockable_joints
-        #: joints with dry friction, in the order of their slip directions in ``p``
-        self.frictional = mech.frictional_joints
-        #: frictional joints whose levels grow with their reaction (equations.reaction)
-        self.reacting = reacting(mech)
-        nb = len(self.body_names)
-        self.nq = nq = 3 * nb
-        self.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
-        for i, b in enumerate(mech.bodies.values()):
-            self.mass[3 * i + 2] = b.inertia
-        self.bidx = {n: i for i, n in enumerate(self.body_names)}
-
-        q = ca.SX.sym("q", nq)
-        v = ca.SX.sym("v", nq)
-        a = ca.SX.sym("a", nq)
-        t = ca.SX.sym("t")
-        nl = len(self.locks)
-        #: loads that act in a zone only, in the order of their switches in ``p``
-        self.zoned = [n for n, ld in mech.loads.items() if ld.zone is not None]
-        nz = len(self.zoned)
-        nf = len(self.frictional)
-        #: loads whose law is a Python callable f(t, coordinate, rate): (load, joint index).
-        #: Their values enter as the last parameters, refilled from the state before every
-        #: evaluation (:meth:`fill`); the solver's Jacobian gets their chain-rule term from
-        #: :meth:`input_jacobian`.
-        self.callables = [(n, list(mech.joints).index(ld.joint))
-                          for n, ld in mech.loads.items() if ld.law.func is not None]
-        nu = len(self.callables)
-        p = ca.SX.sym("p", 2 * nl + nz + nf + nu)
+        build.names(self, mech)
+        nq, nl = self.nq, len(self.locks)
+        nz, nf, nu = len(self.zoned), len(self.frictional), len(self.callables)
+        fr = build.Frame(self, smech, 2 * nl + nz + nf + nu)
+        q, v, a, t, p = fr.q, fr.v, fr.a, fr.t, fr.p
         self._u0 = 2 * nl + nz + nf
         #: entries of ``p`` that make the configuration (the callable loads' values follow)
         self.n_switches = self._u0
@@ -171,178 +93,22 @@ class Model:
         self.n_params = int(p.numel())
         self._sym = (q, v, t, p)
 
-        def angle(body):
-            return 0.0 if body == GROUND else q[3 * self.bidx[body] + 2]
-
-        def point(ref):  # its coordinates may be parameters (symbols in smech)
-            body, _ = ref.split(".", 1)
-            lx, ly = smech.point(ref)
-            if body == GROUND:
-                return ca.vertcat(lx, ly)
-            i = self.bidx[body]
-            cx, cy = mech.bodies[body].centroid
-            return q[3 * i:3 * i + 2] + _rot(q[3 * i + 2]) @ ca.vertcat(lx - cx, ly - cy)
-
-        coords = []
-        rows: list[ca.SX] = []
-        self.rows: list[Row] = []
-        for name, j in mech.joints.items():
-            d = point(j.second) - point(j.first)
-            dth = angle(j.second_body) - angle(j.first_body)
-            if j.type == "revolute":
-                coords.append(dth)
-                jrows = [d[0], d[1]]
-            elif j.type == "prismatic":
-                u = np.array(j.axis, float) / np.hypot(*j.axis)
-                ua = _rot(angle(j.first_body)) @ ca.DM(u)
-                na = ca.vertcat(-ua[1], ua[0])
-                coords.append(ca.dot(ua, d))
-                jrows = [dth - smech.joints[name].angle, ca.dot(na, d)]
-            else:  # a contact: the gap is its row (bilateral) or its coordinate's stop
-                gap, arc = contact_gap_arc(smech.joints[name], d, angle(j.first_body))
-                coords.append(gap if j.unilateral else arc)
-                jrows = [] if j.unilateral else [gap]
-            rows += jrows
-            self.rows += [Row("joint", name)] * len(jrows)
-        c = ca.vertcat(*coords)
-        jidx = {n: i for i, n in enumerate(self.joint_names)}
-        self.jidx = jidx
-        # Gear pairs: two joints' coordinates in a fixed ratio (one row each, a joint row
-        # in all but its label: it may be redundant, e.g. in a closed gear train)
-        for name, gr in smech.gears.items():
-            rows.append(c[jidx[gr.second]] - gr.ratio * c[jidx[gr.first]] - gr.offset)
-            self.rows.append(Row("gear", name))
-        for name, d in smech.drivers.items():
-            rows.append(c[jidx[name]] - driver_expr(d, t))
-            self.rows.append(Row("driver", name))
-        n_base = len(rows)
-        for k, name in enumerate(self.locks):
-            rows.append(p[k] * (c[jidx[name]] - p[nl + k]))
-            self.rows.append(Row("lock", name))
-        # Redundant joint and driver rows (dependent on the others wherever the mechanism
-        # can be) are left out of the equations; the reactions are then shared among all
-        # rows as the minimum-norm solution (post-processing, with ``base_fn``).
-        #: every row before any was dropped, and the dropped ones (indices into it)
-        self.all_rows = list(self.rows)
-        self.dropped = tuple(sorted(set(drop)))
-        if any(not 0 <= i < n_base for i in self.dropped):
-            raise ValueError(f"only joint and driver rows can be dropped, got {drop}")
-        base = ca.jacobian(ca.vertcat(*rows[:n_base]) if n_base else ca.SX(0, 1), q)
-        if self.theta_paths:
-            base = ca.substitute(base, self.theta, ca.DM(self.theta0))
-        self.base_fn = ca.Function("base", [q, t], [ca.densify(base)])
-        self.n_base = n_base
-        keep = [i for i in range(len(rows)) if i not in self.dropped]
-        rows = [rows[i] for i in keep]
-        self.rows = [self.rows[i] for i in keep]
-        self.m = m = len(rows)
-        self.n_fixed = m - nl
-        phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
-        free = ca.vertcat(ca.SX.zeros(m - nl), 1 - p[:nl]) if nl else ca.SX.zeros(m)
+        c, phi, free = build.constraint_rows(self, fr, drop)
+        m = self.m
 
         Phi_q = ca.jacobian(phi, q)
         Phi_t = ca.jacobian(phi, t)
         h = Phi_q @ v + Phi_t
         gamma = -(ca.jacobian(h, q) @ v + ca.jacobian(h, t))
 
-        # Generalized applied forces: gravity, then springs and dampers on joint coordinates.
-        Qf = ca.SX.zeros(nq)
-        g = smech.gravity
-        for i, b in enumerate(smech.bodies.values()):
-            Qf[3 * i] += b.mass * g[0]
-            Qf[3 * i + 1] += b.mass * g[1]
         c_q = ca.jacobian(c, q)
         cdot = c_q @ v
-        for name, j in smech.joints.items():
-            k = jidx[name]
-            gen = 0.0
-            if j.spring is not None:
-                gen -= j.spring.stiffness * (c[k] - j.spring.rest)
-            if j.damper is not None:
-                gen -= j.damper.damping * cdot[k]
-            if not (isinstance(gen, float) and gen == 0.0):
-                Qf += c_q[k, :].T * gen
         cddot = c_q @ a + ca.jacobian(cdot, q) @ v
-        # Kinetic friction of a slipping joint: against its slip direction s = +-1 (0 while
-        # it sticks or stands on a stop); s is a configuration parameter, so the force is
-        # smooth within a configuration and its switches are events.
-        for f, name in enumerate(self.frictional):
-            k = jidx[name]
-            Qf -= c_q[k, :].T * (smech.joints[name].friction.kinetic * p[2 * nl + nz + f])
-        # Kinetic friction from the reaction (equations.reaction): a function of the
-        # multipliers, so it is kept apart from Qf; IDA's residual has it with its own
-        # multipliers, the KKT solves add it by Newton's method.
         lam = ca.SX.sym("lam", m)
-        Qr = ca.SX.zeros(nq)
-        for f, name in enumerate(self.frictional):
-            if name not in self.reacting:
-                continue
-            if len(self.rows_of("joint", name)) != mech.joints[name].rows:
-                raise ModelError(Problem(
-                    f"joints.{name}", "friction", "grows with the joint's reaction, but "
-                    "its constraint rows are redundant and leave the reaction undetermined; "
-                    "use constant friction levels (static, kinetic) there"))
-            grows = reaction.growth(self, name, lam, "kinetic", smech.joints[name].friction)
-            Qr -= c_q[jidx[name], :].T * (grows * p[2 * nl + nz + f])
-
-        # Applied loads: a law times a joint direction, a point force or a body moment.
-        self.load_names = list(mech.loads)
-        self.zone_info: dict[str, tuple[int, float, float]] = {}
-        load_val, load_pow = [], []
-        for name, ld in mech.loads.items():
-            k = jidx[ld.joint] if ld.joint is not None else None
-            if ld.law.func is not None:
-                val = p[self._u0 + [n for n, _ in self.callables].index(name)]
-            else:
-                val = law_expr(ld.law, t, cdot[k] if k is not None else None)
-            if ld.zone is not None:
-                zj = jidx[ld.zone.joint if ld.zone.joint is not None else ld.joint]
-                self.zone_info[name] = (zj, -math.inf if ld.zone.lower is None
-                                        else ld.zone.lower,
-                                        math.inf if ld.zone.upper is None else ld.zone.upper)
-                val = val * p[2 * nl + self.zoned.index(name)]
-            if k is not None:
-                Qf += c_q[k, :].T * val
-                power = val * cdot[k]
-            else:
-                i = self.bidx[ld.body]
-                om = v[3 * i + 2]
-                if ld.point is None:
-                    Qf[3 * i + 2] += val
-                    power = val * om
-                else:
-                    dvec = np.array(ld.direction, float) / math.hypot(*ld.direction)
-                    dirn = ca.DM(dvec) if ld.frame == "global" else \
-                        _rot(q[3 * i + 2]) @ ca.DM(dvec)
-                    F = dirn * val
-                    r = point(f"{ld.body}.{ld.point}") - q[3 * i:3 * i + 2]
-                    Qf[3 * i] += F[0]
-                    Qf[3 * i + 1] += F[1]
-                    Qf[3 * i + 2] += r[0] * F[1] - r[1] * F[0]
-                    vP = v[3 * i:3 * i + 2] + om * ca.vertcat(-r[1], r[0])
-                    power = ca.dot(F, vP)
-            load_val.append(val)
-            load_pow.append(power)
-
-        # Force elements between two points: tension pulls the points together.
-        self.element_names = list(mech.elements)
-        el_len, el_rate, el_ten = [], [], []
-        for el in smech.elements.values():
-            dvec = point(el.second) - point(el.first)
-            L = ca.sqrt(ca.dot(dvec, dvec))
-            L_q = ca.jacobian(L, q)
-            Ld = L_q @ v
-            T = el.preload + el.stiffness * (L - el.rest) + el.damping * Ld
-            Qf -= L_q.T * T
-            el_len.append(L)
-            el_rate.append(Ld)
-            el_ten.append(T)
-
-        # Points where joint forces are reported: each joint's second (or first) connect point.
-        ref_pts = []
-        for j in mech.joints.values():
-            ref_pts.append(point(j.second))
-        P = ca.horzcat(*ref_pts) if ref_pts else ca.SX(2, 0)
+        forces = build.applied_forces(self, fr, c, c_q, cdot, lam)
+        Qf, Qr, P = forces.Qf, forces.Qr, forces.P
+        load_val, load_pow = forces.load_val, forces.load_pow
+        el_len, el_rate, el_ten = forces.el_len, forces.el_rate, forces.el_ten
 
         mass_sx = []
         for b in smech.bodies.values():
@@ -358,26 +124,7 @@ class Model:
             return ca.vertcat(qp - v + Phi_q.T @ mu, Mdiag * vp + Phi_q.T @ lam - Qf,
                               phi + free * mu, h + free * lam)
 
-        # The powers IDA integrates with the motion (its quadratures, the energy audit's
-        # works and losses): the drivers', the loads', the dampers' (joints and elements)
-        # and the kinetic friction's. The drivers' is the constraint forces' power
-        # lambda . Phi_t (only driver rows depend on t; dropped rows do not change it).
-        # Written v . (M a - Q) with IDA's accelerations instead, a driven rod's work was
-        # 15x less accurate (1e-6 J against 7.7e-8 at rtol 1e-8): y' is one order less
-        # accurate than y. The multipliers, held to ATOL_LAMBDA, stall it at about 1e-9
-        # of the work from rtol 1e-10 on.
-        diss = ca.SX(0)
-        for name, j in smech.joints.items():
-            if j.damper is not None:
-                diss += j.damper.damping * cdot[jidx[name]] ** 2
-        for el, rate in zip(smech.elements.values(), el_rate, strict=True):
-            diss += el.damping * rate**2
-        fr = ca.SX(0)
-        for f, name in enumerate(self.frictional):
-            kin = reaction.level(self, name, lam, "kinetic", smech.joints[name].friction)
-            fr += kin * p[2 * nl + nz + f] * cdot[jidx[name]]
-        powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
-                            diss, fr)
+        powers = build.powers(self, fr, lam, Phi_t, cdot, forces)
         #: the symbolic equations with the parameters theta free (sensitivities)
         self.sym = {"q": q, "v": v, "a": a, "t": t, "p": p, "theta": self.theta,
                     "phi": phi, "Phi_q": Phi_q, "Phi_t": Phi_t, "h": h, "gamma": gamma,
@@ -394,6 +141,39 @@ class Model:
             ne, nld = len(el_len), len(load_val)
             el_len, el_rate, el_ten = ex[:ne], ex[ne:2 * ne], ex[2 * ne:3 * ne]
             load_val, load_pow = ex[3 * ne:3 * ne + nld], ex[3 * ne + nld:]
+        e = SimpleNamespace(q=q, v=v, a=a, t=t, p=p, lam=lam, y=y, yp=yp, phi=phi,
+                            Phi_q=Phi_q, Phi_t=Phi_t, gamma=gamma, Qf=Qf, Qr=Qr, c=c,
+                            cdot=cdot, c_q=c_q, cddot=cddot, P=P, powers=powers, free=free,
+                            F=ggl(Phi_q, Qf + Qr, phi, h, Mdiag), el_len=el_len,
+                            el_rate=el_rate, el_ten=el_ten, load_val=load_val,
+                            load_pow=load_pow)
+        self._functions(e)
+        # IDA's unknowns: a body pinned to the ground by its angle alone (not with load laws
+        # given as Python callables, whose solver Jacobian terms are in centroid
+        # coordinates)
+        pins = {b: j for b, j in ground_pins(mech).items()
+                if pinned_angles and not self.callables and j not in self.reacting
+                and sum(r == Row("joint", j) for r in self.rows) == 2}
+        #: what IDA integrates (:class:`~cmm_dae.equations.unknowns.Unknowns`)
+        self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)
+        self.compiled = False
+        if compiled:  # IDA's residual and Jacobian (the model's are its core) in C
+            funcs = compile_functions([self.ida.res_fn, self.ida.jac_fn])
+            if funcs is not None:
+                self.ida.res_fn, self.ida.jac_fn = funcs
+                self.compiled = True
+
+
+    def _functions(self, e: SimpleNamespace) -> None:
+        """The numeric CasADi functions of the model from its expressions ``e`` (with the
+        parameters theta at their values): constraints, coordinates, KKT parts, outputs,
+        powers, IDA's residual and Jacobian, and the single-point evaluators."""
+        q, v, a, t, p, lam, y, yp = e.q, e.v, e.a, e.t, e.p, e.lam, e.y, e.yp
+        phi, Phi_q, Phi_t, gamma, Qf, Qr = e.phi, e.Phi_q, e.Phi_t, e.gamma, e.Qf, e.Qr
+        c, cdot, c_q, cddot, P, powers, free = (e.c, e.cdot, e.c_q, e.cddot, e.P, e.powers,
+                                                e.free)
+        el_len, el_rate, el_ten = e.el_len, e.el_rate, e.el_ten
+        load_val, load_pow = e.load_val, e.load_pow
         dn = ca.densify
         self.phi_fn = ca.Function("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)])
         #: Phi_q's nonzeros only, in CSC order of :attr:`phi_q_pattern` (large mechanisms'
@@ -448,7 +228,7 @@ class Model:
         self._all_rows_index: dict[tuple[str, str], list[int]] | None = None
 
         cj = ca.SX.sym("cj")
-        F = ggl(Phi_q, Qf + Qr, phi, h, Mdiag)
+        F = e.F
         J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
         self.N = int(y.numel())
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
@@ -463,20 +243,6 @@ class Model:
         #: the symbolic residual (``res_fn`` may be replaced by a compiled one below), which
         #: :mod:`cmm_dae.integrators.csegment` generates C from with ``jac_sparse_fn``
         self.res_sx = self.res_fn
-        # IDA's unknowns: a body pinned to the ground by its angle alone (not with load laws
-        # given as Python callables, whose solver Jacobian terms are in centroid
-        # coordinates)
-        pins = {b: j for b, j in ground_pins(mech).items()
-                if pinned_angles and not self.callables and j not in self.reacting
-                and sum(r == Row("joint", j) for r in self.rows) == 2}
-        #: what IDA integrates (:class:`~cmm_dae.equations.unknowns.Unknowns`)
-        self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)
-        self.compiled = False
-        if compiled:  # IDA's residual and Jacobian (the model's are its core) in C
-            funcs = compile_functions([self.ida.res_fn, self.ida.jac_fn])
-            if funcs is not None:
-                self.ida.res_fn, self.ida.jac_fn = funcs
-                self.compiled = True
 
     # ------------------------------------------------------------- named interface
     def free_rows(self, p: np.ndarray) -> np.ndarray:
