@@ -14,14 +14,8 @@ This is the only module that imports scikit-sundae.
 
 from __future__ import annotations
 
-import contextlib
-import io
-import logging
 import math
-import re
-import sys
 import warnings
-from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -30,12 +24,26 @@ import sksundae as sun
 
 from ..core.errors import CmmError, SolverError, Status
 from ..core.records import Stats
-from ..equations.kinematics import project_state, row_names, singular_ratio
+from ..equations.kinematics import project_state, singular_ratio
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
 from . import csegment
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
+from .ida_steps import (  # noqa: F401 (ida.quiet_sundials and the limits, as before)
+    CRAWL_STEP,
+    FALLING_RATIO,
+    IN_PLACE_STEPS,
+    OUTGROWN,
+    ROUNDOFF_ATOL,
+    SLOW_STEPS,
+    _CrawlError,
+    _output_times,
+    _own_steps,
+    _StalledError,
+    failure,
+    quiet_sundials,
+)
 from .tolerances import (
     ATOL_LAMBDA,
     ATOL_MU,
@@ -48,138 +56,11 @@ from .tolerances import (
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
 #: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
 SPARSE_FROM = 300
-#: A failure where the constraints' singular-value ratio is below this and falling along
-#: the motion is handed to the singular-position crossing (which says "dead point" if it
-#: finds no singular instant ahead): at rtol 1e-12 IDA gave up on A02 at ratios up to
-#: 0.052, 0.05 s before the instant.
-FALLING_RATIO = 0.1
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
 #: shipped models, so the margin leaves a factor of 500.
 PUSH_MARGIN = 0.1
-
-
-def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
-    if opts.output_dt is None:
-        return np.array([opts.t_end])
-    n = int(math.floor(opts.t_end / opts.output_dt + 1e-9))
-    grid = opts.output_dt * np.arange(1, n + 1)
-    # An output time just after a segment start (an event a hair before a grid time) is
-    # left out: IDA restarting toward an output 6e-11 s away failed on the double-folded
-    # mechanism and the run ended as a dead point. The event's own sample stands in.
-    grid = grid[grid > t0 + ev.ZENO_DT * max(1.0, opts.t_end)]
-    if grid.size == 0 or grid[-1] < opts.t_end - 1e-12 * opts.t_end:
-        grid = np.append(grid, opts.t_end)
-    return grid
-
-
-_LOG = logging.getLogger(__name__)  # cmm_dae.integrators.ida
-_SUNDIALS_LINE = re.compile(r"^\[\w+, Error: -?\d+\]")
-
-
-class _SundialsOut(io.TextIOBase):
-    """Standard output while IDA runs: scikit-sundae prints SUNDIALS' failure messages
-    (``[IDAHandleFailure, Error: -4] ...``, about 20 in an A02 run that succeeds) with
-    ``print``; those lines go to the logger ``cmm_dae.integrators.ida`` at debug level, every other
-    line (a user's load law printing) to the real standard output."""
-
-    def __init__(self, out):
-        self.out, self.part = out, ""
-
-    def write(self, text: str) -> int:
-        lines = (self.part + text).split("\n")
-        self.part = lines.pop()
-        for line in lines:
-            if _SUNDIALS_LINE.match(line):
-                _LOG.debug("%s", line)
-            elif line and self.out is not None:
-                self.out.write(line + "\n")
-        return len(text)
-
-    def flush(self) -> None:
-        if self.part and not _SUNDIALS_LINE.match(self.part) and self.out is not None:
-            self.out.write(self.part)
-        self.part = ""
-
-
-@contextlib.contextmanager
-def quiet_sundials():
-    """A context in which SUNDIALS' own messages go to the logger, not to stdout."""
-    out = _SundialsOut(sys.stdout)
-    try:
-        with contextlib.redirect_stdout(out):
-            yield
-    finally:
-        out.flush()
-
-
-def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
-               interrupted=lambda: None):
-    """IDA's own steps from tspan[0] to tspan[-1], as ``solver.solve`` returns them for a
-    two-point span, but kept in lists: scikit-sundae grows its output arrays by 500 rows
-    at a time with a copy of all rows before, so its cost per step grew with the run
-    (54 us per step over 100 s, 135 over 1000 s). The same IDA calls (one step at a time,
-    the end as stop time), so the same steps; a root, the stop time or a failure ends it.
-    A Ctrl-C between two steps ends it as a root would, ``interrupted()`` told, the steps
-    so far kept."""
-    t_end = float(tspan[-1])
-    first = solver.init_step(float(tspan[0]), y0, yp0)
-    ts, ys = [first.t], [first.y]
-    x = first
-    try:
-        while True:
-            x = solver.step(t_end, method="onestep", tstop=t_end)
-            ts.append(x.t)
-            ys.append(x.y)
-            if x.status != 0:
-                break
-    except KeyboardInterrupt:
-        interrupted()
-        # a root return (status 2) that the caller reads as the interruption
-        return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
-                               i_events=None, nfev=x.nfev, njev=x.njev)
-    return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
-                           message=x.message, i_events=x.i_events, nfev=x.nfev,
-                           njev=x.njev)
-
-
-class _StalledError(Exception):
-    """Raised inside the root function when the run's step budget is spent."""
-
-
-class _CrawlError(Exception):
-    """Raised inside the root function when IDA's steps no longer move t."""
-
-
-#: Smallest absolute tolerance of positions and velocities, relative to the largest of
-#: each at a segment's start (10 units of round-off): IDA's Newton iteration cannot meet
-#: a tolerance below the round-off of the state it solves for.
-ROUNDOFF_ATOL = 10.0 * np.finfo(float).eps
-
-#: Factor by which the round-off floor must exceed a segment's absolute tolerance for an
-#: IDA failure to count as the state having outgrown it (see ``_roundoff_atol``).
-OUTGROWN = 100.0
-
-#: Consecutive IDA steps that leave t where it was, or move it by less than
-#: :data:`CRAWL_STEP` of the run's time scale, after which the segment ends as a failure at
-#: that state. Next to a singular position IDA halved its step below t's spacing and then
-#: took about a million steps in place (A02 at rtol 1e-10 from t0 = 0, where a step floor
-#: relative to t0 is zero); whether that happened hung on round-off, and it ran for an
-#: hour. Started 0.05 rad from it at rtol 1e-11, IDA took steps of 2e-19 s that did move t,
-#: 500,000 of them, where a different rounding had made it fail at once. The failure goes
-#: to the crossing like any other.
-IN_PLACE_STEPS = 50
-#: A step shorter than this many units of round-off of the run's time scale counts as in
-#: place (about 1e-15 s on a 1-s run; IDA's steps there are 1e-7 s and more).
-CRAWL_STEP = 16.0
-#: Steps after which a segment that has not yet covered one step from its accelerations
-#: (``_first_step``, the order-1 step its tolerances allow) counts as crawling, a failure
-#: retried with that first step. IDA's own first step comes from y' alone; after a cam
-#: follower's landing at rtol 1e-12 it was 4e-15 s, where the index-2 Newton matrix
-#: (mass / h^2 beside the constraint rows) is solved with noise in the multipliers, and
-#: its steps stayed near 1e-13 s for 500,000 steps or grew back, as rounding fell.
-SLOW_STEPS = 200
 
 
 class IdaIntegrator(Integrator):
@@ -387,6 +268,99 @@ class IdaIntegrator(Integrator):
         self.atol[self.u.lam] = lambda_atol(self.relaxed, self.lambda_scale) * self.tol_scale
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
+        opts, hs, u = self.opts, self.hs, self.u
+        first_step, q, v, y0, yp0, t_stop = self._begin(t0, q, v)
+        solver = self._solver(first_step)
+        tspan, extra = self._tspan(t0, t_stop)
+        r = self._solve(solver, tspan, y0, yp0, first_step, t0)
+        T, Y = np.asarray(r.t), np.asarray(r.y)
+        failed = r.status < 0 or self.crawled  # steps in place are a failure there
+        h1 = self._first_step(y0, yp0, t_stop - t0) \
+            if failed and self.error is None and not first_step else 0.0
+        if h1 > 0.0 and T[-1] - t0 < h1:
+            # IDA's own first step comes from y' and the tolerances alone: on Andrews'
+            # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
+            # (mass / h^2 beside the constraint rows) cannot be solved, and each failure
+            # only made it smaller; after A02's third crossing (40 loops, rtol 1e-11) its
+            # steps grew to 4e-8 s in all and then failed alike. A failure before one
+            # step from the accelerations is covered: again with that first step.
+            self.first_step = h1
+            return self.advance(t0, q, v, rec)
+        if failed and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
+            # IDA cannot restart where a singular-position crossing ended, even with a first
+            # step from the accelerations: still too near it; the policy takes the
+            # crossing further out
+            return SegmentEnd(t0, q, v, (), "singular")
+        if failed and self.error is None and not self.relaxed and (
+                T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
+            # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
+            # on a non-parallelogram A02 at rtol 1e-12): large or near-singular constraint
+            # sets (long chains, just past a singular position) fail on the multipliers'
+            # error test alone. Leave them out of it from here on and start again.
+            self.relax_multipliers()
+            return self.advance(t0, q, v, rec)
+        keep = np.arange(1, T.size)
+        keep = keep[T[keep] > t0]  # (a failure without a step returns t0 once more)
+        if extra is not None:
+            keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
+        if self.error is not None:  # only what was computed before the failure
+            keep = keep[T[keep] <= self.t_error]
+        # IDA's own steps (no output grid) end, at a failure, with its last time repeated
+        # (A02 at rtol 1e-10: three samples at one time before each crossing): the last
+        if keep.size:  # (a failure at the very start keeps nothing)
+            keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
+        Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
+        # each sample's works since the sample before it (zero at the segment's start)
+        W = u.works(Y[keep])
+        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current(),
+                      work=np.diff(W, axis=0, prepend=np.zeros((1, W.shape[1]))))
+        t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
+        if self.error is not None:
+            e = self.error
+            raise SolverError(f"the integration failed after t = "
+                              f"{self.t_error:.9g} s: "
+                              f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
+        if failed and self.error is None and T[-1] > t0 and \
+                self._roundoff_atol(Y[-1], check=True):
+            # the coordinates grew until their round-off passes the absolute tolerance (the
+            # squeezer from rest to 1400 rad/s: at rtol 1e-12, atol 1e-14 on a velocity
+            # through zero is below 3e-13 of round-off; Newton could not converge, the step
+            # collapsed to 1e-22 s and it read as a dead point): on from here with it raised
+            return SegmentEnd(t1, q1, v1, (), "restart")
+        if failed:
+            self.v_fail = v1
+            message, status, ratio = failure(self.model, self.hs, self.p, self.ratio0,
+                                             self.crawled, self.v_fail, r, t1, q1)
+            if status is Status.DEAD_POINT or (
+                    max(ratio, self.ratio0) < PAST_RATIO
+                    and leaves_singular(self.model, self.p, t1, q1, v1)):
+                # the constraints collapse ahead: let the policy try to cross (a singular
+                # position on the motion's branch), which says "dead point" if it cannot;
+                # or the segment started next to one and failed on its way out (A02 started
+                # 0.05 rad past the horizontal at rtol 1e-11), which the crossing's way
+                # out covers
+                return SegmentEnd(t1, q1, v1, (), "singular")
+            raise SolverError(message, status=status)
+        if r.status == 2 and self.stalled:
+            raise SolverError(
+                f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
+                "in this run (tiny steps: a grazing contact, a near-singular position or "
+                "forces too stiff for the tolerances); raise max_steps to go on",
+                status=Status.STALLED)
+        if r.status == 2 and self.interrupted:
+            raise KeyboardInterrupt
+        if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
+            info = np.asarray(r.i_events)[-1]
+            hit = tuple(self.triggers[i] for i in np.flatnonzero(info[1:] != 0))
+            return SegmentEnd(t1, q1, v1, hit, "event")
+        if t_stop < opts.t_end:
+            return SegmentEnd(t1, q1, v1, (), "restart")
+        return SegmentEnd(t1, q1, v1, (), "end")
+
+    def _begin(self, t0: float, q: np.ndarray, v: np.ndarray) -> tuple:
+        """A segment's start at (t0, q, v): its event functions, budgets and step limits,
+        the state projected onto the constraints and IDA's consistent ``y0, yp0`` from a
+        KKT solve; (first step, q, v, y0, yp0, the segment's stop time)."""
         model, opts, hs, u = self.model, self.opts, self.hs, self.u
         self.p[:] = hs.p
         if not self._scaled:  # the run's first segment: its force scale
@@ -418,7 +392,6 @@ class IdaIntegrator(Integrator):
         self.t_start = t0
         # (a segment given its first step is not judged slow again: it fails otherwise)
         self.h_natural = 0.0 if first_step else self._first_step(y0, yp0, t_stop - t0)
-        ne = 1 + len(self.triggers)
         # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
         # failure next to a singular position halved its step down to 1e-17 s and then
         # took a million such steps in place (A02 at rtol 1e-10). With this floor it fails
@@ -428,6 +401,13 @@ class IdaIntegrator(Integrator):
         if first_step:
             first_step = max(first_step, 2.0 * self.min_step)
 
+        return first_step, q, v, y0, yp0, t_stop
+
+    def _solver(self, first_step: float):
+        """IDA for the segment (None on the compiled path), with callbacks that keep a
+        Ctrl-C, a spent budget, a crawl or an exception as a clean end."""
+        u = self.u
+        ne = 1 + len(self.triggers)
         # scikit-sundae keeps its event history on the function object: a fresh one per
         # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
         # callback would abort IDA and lose the segment's outputs: it is caught here and
@@ -487,6 +467,11 @@ class IdaIntegrator(Integrator):
                 max_step=math.inf if self.min_step else 0.0,  # (0: unbounded, below min)
                 algebraic_idx=list(range(u.lam.start, u.N)),
                 **self.ls_options)
+        return solver
+
+    def _tspan(self, t0: float, t_stop: float) -> tuple[np.ndarray, float | None]:
+        """The output times of a segment from t0 (``extra``: a midpoint to drop again)."""
+        opts = self.opts
         outs = _output_times(opts, t0)
         if t_stop < opts.t_end:
             outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
@@ -499,13 +484,18 @@ class IdaIntegrator(Integrator):
             tspan = np.array([tspan[0], extra, tspan[1]])
         # IDA evaluates the root functions at output times too: not steps
         self.outputs = set(tspan.tolist())
+        return tspan, extra
+
+    def _solve(self, solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
+               first_step: float, t0: float):
+        """IDA's run over ``tspan`` (Python or compiled), its counts added to the stats."""
         try:
             if self.c is not None:
                 r = self._solve_compiled(tspan, y0, yp0, first_step)
             else:
                 with quiet_sundials():
                     r = (_own_steps(solver, tspan, y0, yp0, self._interrupt)
-                         if opts.output_dt is None else solver.solve(tspan, y0, yp0))
+                         if self.opts.output_dt is None else solver.solve(tspan, y0, yp0))
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
@@ -515,88 +505,7 @@ class IdaIntegrator(Integrator):
         self.stats.steps += self.n_steps
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
-        T, Y = np.asarray(r.t), np.asarray(r.y)
-        failed = r.status < 0 or self.crawled  # steps in place are a failure there
-        h1 = self._first_step(y0, yp0, t_stop - t0) \
-            if failed and self.error is None and not first_step else 0.0
-        if h1 > 0.0 and T[-1] - t0 < h1:
-            # IDA's own first step comes from y' and the tolerances alone: on Andrews'
-            # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
-            # (mass / h^2 beside the constraint rows) cannot be solved, and each failure
-            # only made it smaller; after A02's third crossing (40 loops, rtol 1e-11) its
-            # steps grew to 4e-8 s in all and then failed alike. A failure before one
-            # step from the accelerations is covered: again with that first step.
-            self.first_step = h1
-            return self.advance(t0, q, v, rec)
-        if failed and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
-            # IDA cannot restart where a singular-position crossing ended, even with a first
-            # step from the accelerations: still too near it; the policy takes the
-            # crossing further out
-            return SegmentEnd(t0, q, v, (), "singular")
-        if failed and self.error is None and not self.relaxed and (
-                T[-1] <= t0 + ev.ZENO_DT * max(1.0, abs(t0))):
-            # IDA could not take a first step (or gave up a hair after the start: 3e-14 s
-            # on a non-parallelogram A02 at rtol 1e-12): large or near-singular constraint
-            # sets (long chains, just past a singular position) fail on the multipliers'
-            # error test alone. Leave them out of it from here on and start again.
-            self.relax_multipliers()
-            return self.advance(t0, q, v, rec)
-        keep = np.arange(1, T.size)
-        keep = keep[T[keep] > t0]  # (a failure without a step returns t0 once more)
-        if extra is not None:
-            keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
-        if self.error is not None:  # only what was computed before the failure
-            keep = keep[T[keep] <= self.t_error]
-        # IDA's own steps (no output grid) end, at a failure, with its last time repeated
-        # (A02 at rtol 1e-10: three samples at one time before each crossing): the last
-        if keep.size:  # (a failure at the very start keeps nothing)
-            keep = keep[np.append(T[keep][1:] > T[keep][:-1], True)]
-        Q, V = u.centroids(Y[np.append(keep, T.size - 1)])
-        # each sample's works since the sample before it (zero at the segment's start)
-        W = u.works(Y[keep])
-        rec.add_block(T[keep], Q[:-1], V[:-1], hs.current(),
-                      work=np.diff(W, axis=0, prepend=np.zeros((1, W.shape[1]))))
-        t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
-        if self.error is not None:
-            e = self.error
-            raise SolverError(f"the integration failed after t = "
-                              f"{self.t_error:.9g} s: "
-                              f"{type(e).__name__}: {e}", status=Status.NUMERICAL) from e
-        if failed and self.error is None and T[-1] > t0 and \
-                self._roundoff_atol(Y[-1], check=True):
-            # the coordinates grew until their round-off passes the absolute tolerance (the
-            # squeezer from rest to 1400 rad/s: at rtol 1e-12, atol 1e-14 on a velocity
-            # through zero is below 3e-13 of round-off; Newton could not converge, the step
-            # collapsed to 1e-22 s and it read as a dead point): on from here with it raised
-            return SegmentEnd(t1, q1, v1, (), "restart")
-        if failed:
-            self.v_fail = v1
-            message, status, ratio = self._failure(r, t1, q1)
-            if status is Status.DEAD_POINT or (
-                    max(ratio, self.ratio0) < PAST_RATIO
-                    and leaves_singular(self.model, self.p, t1, q1, v1)):
-                # the constraints collapse ahead: let the policy try to cross (a singular
-                # position on the motion's branch), which says "dead point" if it cannot;
-                # or the segment started next to one and failed on its way out (A02 started
-                # 0.05 rad past the horizontal at rtol 1e-11), which the crossing's way
-                # out covers
-                return SegmentEnd(t1, q1, v1, (), "singular")
-            raise SolverError(message, status=status)
-        if r.status == 2 and self.stalled:
-            raise SolverError(
-                f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
-                "in this run (tiny steps: a grazing contact, a near-singular position or "
-                "forces too stiff for the tolerances); raise max_steps to go on",
-                status=Status.STALLED)
-        if r.status == 2 and self.interrupted:
-            raise KeyboardInterrupt
-        if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment
-            info = np.asarray(r.i_events)[-1]
-            hit = tuple(self.triggers[i] for i in np.flatnonzero(info[1:] != 0))
-            return SegmentEnd(t1, q1, v1, hit, "event")
-        if t_stop < opts.t_end:
-            return SegmentEnd(t1, q1, v1, (), "restart")
-        return SegmentEnd(t1, q1, v1, (), "end")
+        return r
 
     def _interrupt(self) -> None:
         """Ctrl-C arrived outside IDA's callbacks: the segment ends with what it has."""
@@ -639,33 +548,3 @@ class IdaIntegrator(Integrator):
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted
         return r
-
-    def _ratio_falls(self, q: np.ndarray, tt: float, ratio: float) -> bool:
-        """Whether the constraints' singular-value ratio falls along the motion at the
-        failure (a singular position ahead, not only a badly conditioned stretch)."""
-        v = self.v_fail
-        h = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
-        return singular_ratio(self.model, q + v * h, tt + h, self.p) < ratio
-
-    def _failure(self, r, tt: float, q: np.ndarray) -> tuple[str, Status, float]:
-        """The message and status of IDA's failure at (tt, q), and the constraints'
-        singular-value ratio there."""
-        cfg = self.hs.configurations[self.hs.current()].label
-        # the constraint rows' conditioning at the failure against the segment's start: a
-        # dead point shows as a collapse of the smallest singular value (units mix, so
-        # only the ratio of the two says anything)
-        labels, ratio = ev.dependent_rows(self.model, q, tt, self.p, tol=1.0)
-        # (also a failure very near one, ahead or just past it: the policy tells which)
-        if ratio < 0.2 * self.ratio0 or ratio < 0.01 or (
-                ratio < FALLING_RATIO and self._ratio_falls(q, tt, ratio)):
-            what = (f"dead point at t = {tt:.6g} s: the constraints of {row_names(labels)} "
-                    f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
-                    "cannot follow its drivers through this position")
-            status = Status.DEAD_POINT
-        else:
-            what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
-                    "tolerances may be too tight or the forces too stiff)")
-            status = Status.INTEGRATOR
-        ida = (f"{IN_PLACE_STEPS} steps too short to move t (a crawl)" if self.crawled
-               else f"{r.message} (status {r.status})")
-        return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio

@@ -1,0 +1,183 @@
+"""IDA's stepping helpers for :mod:`.ida`: output grids, SUNDIALS' messages to the logger,
+IDA's own steps kept in lists, the limits that tell a crawl or a stall, and the message of
+a failure."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import math
+import re
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..core.errors import Status
+from ..equations.kinematics import row_names, singular_ratio
+from ..equations.model import Model
+from ..hybrid import policy as ev
+from .contract import RunOptions
+
+__all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOFF_ATOL",
+           "SLOW_STEPS", "failure", "quiet_sundials"]
+
+#: A failure where the constraints' singular-value ratio is below this and falling along
+#: the motion is handed to the singular-position crossing (which says "dead point" if it
+#: finds no singular instant ahead): at rtol 1e-12 IDA gave up on A02 at ratios up to
+#: 0.052, 0.05 s before the instant.
+FALLING_RATIO = 0.1
+
+
+def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
+    if opts.output_dt is None:
+        return np.array([opts.t_end])
+    n = int(math.floor(opts.t_end / opts.output_dt + 1e-9))
+    grid = opts.output_dt * np.arange(1, n + 1)
+    # An output time just after a segment start (an event a hair before a grid time) is
+    # left out: IDA restarting toward an output 6e-11 s away failed on the double-folded
+    # mechanism and the run ended as a dead point. The event's own sample stands in.
+    grid = grid[grid > t0 + ev.ZENO_DT * max(1.0, opts.t_end)]
+    if grid.size == 0 or grid[-1] < opts.t_end - 1e-12 * opts.t_end:
+        grid = np.append(grid, opts.t_end)
+    return grid
+
+
+# the logger users know (cmm_dae.integrators.ida), where these helpers lived first
+_LOG = logging.getLogger("cmm_dae.integrators.ida")
+_SUNDIALS_LINE = re.compile(r"^\[\w+, Error: -?\d+\]")
+
+
+class _SundialsOut(io.TextIOBase):
+    """Standard output while IDA runs: scikit-sundae prints SUNDIALS' failure messages
+    (``[IDAHandleFailure, Error: -4] ...``, about 20 in an A02 run that succeeds) with
+    ``print``; those lines go to the logger ``cmm_dae.integrators.ida`` at debug level, every other
+    line (a user's load law printing) to the real standard output."""
+
+    def __init__(self, out):
+        self.out, self.part = out, ""
+
+    def write(self, text: str) -> int:
+        lines = (self.part + text).split("\n")
+        self.part = lines.pop()
+        for line in lines:
+            if _SUNDIALS_LINE.match(line):
+                _LOG.debug("%s", line)
+            elif line and self.out is not None:
+                self.out.write(line + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        if self.part and not _SUNDIALS_LINE.match(self.part) and self.out is not None:
+            self.out.write(self.part)
+        self.part = ""
+
+
+@contextlib.contextmanager
+def quiet_sundials():
+    """A context in which SUNDIALS' own messages go to the logger, not to stdout."""
+    out = _SundialsOut(sys.stdout)
+    try:
+        with contextlib.redirect_stdout(out):
+            yield
+    finally:
+        out.flush()
+
+
+def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
+               interrupted=lambda: None):
+    """IDA's own steps from tspan[0] to tspan[-1], as ``solver.solve`` returns them for a
+    two-point span, but kept in lists: scikit-sundae grows its output arrays by 500 rows
+    at a time with a copy of all rows before, so its cost per step grew with the run
+    (54 us per step over 100 s, 135 over 1000 s). The same IDA calls (one step at a time,
+    the end as stop time), so the same steps; a root, the stop time or a failure ends it.
+    A Ctrl-C between two steps ends it as a root would, ``interrupted()`` told, the steps
+    so far kept."""
+    t_end = float(tspan[-1])
+    first = solver.init_step(float(tspan[0]), y0, yp0)
+    ts, ys = [first.t], [first.y]
+    x = first
+    try:
+        while True:
+            x = solver.step(t_end, method="onestep", tstop=t_end)
+            ts.append(x.t)
+            ys.append(x.y)
+            if x.status != 0:
+                break
+    except KeyboardInterrupt:
+        interrupted()
+        # a root return (status 2) that the caller reads as the interruption
+        return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
+                               i_events=None, nfev=x.nfev, njev=x.njev)
+    return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
+                           message=x.message, i_events=x.i_events, nfev=x.nfev,
+                           njev=x.njev)
+
+
+class _StalledError(Exception):
+    """Raised inside the root function when the run's step budget is spent."""
+
+
+class _CrawlError(Exception):
+    """Raised inside the root function when IDA's steps no longer move t."""
+
+
+#: Smallest absolute tolerance of positions and velocities, relative to the largest of
+#: each at a segment's start (10 units of round-off): IDA's Newton iteration cannot meet
+#: a tolerance below the round-off of the state it solves for.
+ROUNDOFF_ATOL = 10.0 * np.finfo(float).eps
+
+#: Factor by which the round-off floor must exceed a segment's absolute tolerance for an
+#: IDA failure to count as the state having outgrown it (see ``_roundoff_atol``).
+OUTGROWN = 100.0
+
+#: Consecutive IDA steps that leave t where it was, or move it by less than
+#: :data:`CRAWL_STEP` of the run's time scale, after which the segment ends as a failure at
+#: that state. Next to a singular position IDA halved its step below t's spacing and then
+#: took about a million steps in place (A02 at rtol 1e-10 from t0 = 0, where a step floor
+#: relative to t0 is zero); whether that happened hung on round-off, and it ran for an
+#: hour. Started 0.05 rad from it at rtol 1e-11, IDA took steps of 2e-19 s that did move t,
+#: 500,000 of them, where a different rounding had made it fail at once. The failure goes
+#: to the crossing like any other.
+IN_PLACE_STEPS = 50
+#: A step shorter than this many units of round-off of the run's time scale counts as in
+#: place (about 1e-15 s on a 1-s run; IDA's steps there are 1e-7 s and more).
+CRAWL_STEP = 16.0
+#: Steps after which a segment that has not yet covered one step from its accelerations
+#: (``_first_step``, the order-1 step its tolerances allow) counts as crawling, a failure
+#: retried with that first step. IDA's own first step comes from y' alone; after a cam
+#: follower's landing at rtol 1e-12 it was 4e-15 s, where the index-2 Newton matrix
+#: (mass / h^2 beside the constraint rows) is solved with noise in the multipliers, and
+#: its steps stayed near 1e-13 s for 500,000 steps or grew back, as rounding fell.
+SLOW_STEPS = 200
+
+
+def failure(model: Model, hs, p: np.ndarray, ratio0: float, crawled: bool,
+            v_fail: np.ndarray, r, tt: float, q: np.ndarray) -> tuple[str, Status, float]:
+    """The message and status of IDA's failure at (tt, q) in the configuration of ``hs``
+    (parameters ``p``; ``ratio0`` the constraints' singular-value ratio at the segment's
+    start, ``v_fail`` the velocities at the failure), and the ratio there."""
+    cfg = hs.configurations[hs.current()].label
+    # the constraint rows' conditioning at the failure against the segment's start: a
+    # dead point shows as a collapse of the smallest singular value (units mix, so
+    # only the ratio of the two says anything)
+    labels, ratio = ev.dependent_rows(model, q, tt, p, tol=1.0)
+
+    def falls() -> bool:  # the ratio falls along the motion: a singular position ahead
+        h = 1e-6 / max(float(np.max(np.abs(v_fail), initial=0.0)), 1e-300)
+        return singular_ratio(model, q + v_fail * h, tt + h, p) < ratio
+
+    # (also a failure very near one, ahead or just past it: the policy tells which)
+    if ratio < 0.2 * ratio0 or ratio < 0.01 or (ratio < FALLING_RATIO and falls()):
+        what = (f"dead point at t = {tt:.6g} s: the constraints of {row_names(labels)} "
+                f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
+                "cannot follow its drivers through this position")
+        status = Status.DEAD_POINT
+    else:
+        what = (f"IDA could not continue at t = {tt:.9g} s (no dead point found: the "
+                "tolerances may be too tight or the forces too stiff)")
+        status = Status.INTEGRATOR
+    ida = (f"{IN_PLACE_STEPS} steps too short to move t (a crawl)" if crawled
+           else f"{r.message} (status {r.status})")
+    return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio
