@@ -4,13 +4,10 @@ Stabilized index-2 (Gear-Gupta-Leimkuhler) form, ``y = [q, v, lambda, mu]``::
 
     q' - v + Phi_q^T mu = 0,   M v' + Phi_q^T lambda - Q = 0,   Phi = 0,   Phi_q v + Phi_t = 0
 
-with the residual and its exact Jacobian ``dF/dy + cj dF/dy'`` evaluated through CasADi's
-buffer API straight into scikit-sundae's arrays. Each call of :meth:`IdaIntegrator.advance`
-is one IDA segment in one configuration, ended by the root of an event function of
-:mod:`cmm_dae.hybrid.policy` or by the end time.
-
-This is the only module that imports scikit-sundae.
-"""
+with the residual and its exact Jacobian ``dF/dy + cj dF/dy'`` (:mod:`.ida_callbacks`)
+written through CasADi's buffers into scikit-sundae's arrays. Each :meth:`~IdaIntegrator.
+advance` is one IDA segment in one configuration, ended by a root of an event function of
+:mod:`cmm_dae.hybrid.policy` or by the end time (its limits: :mod:`.ida_steps`)."""
 
 from __future__ import annotations
 
@@ -30,27 +27,21 @@ from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
 from . import csegment
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
-from .ida_steps import (  # noqa: F401 (ida.quiet_sundials and the limits, as before)
+from .ida_callbacks import IdaCallbacks
+from .ida_steps import (
     CRAWL_STEP,
-    FALLING_RATIO,
-    IN_PLACE_STEPS,
-    OUTGROWN,
-    ROUNDOFF_ATOL,
-    SLOW_STEPS,
     _CrawlError,
-    _output_times,
     _own_steps,
     _StalledError,
     failure,
     quiet_sundials,
+    segment_times,
 )
 from .tolerances import (
     ATOL_LAMBDA,
-    ATOL_MU,
-    ATOL_WORK,
     lambda_atol,
     lambda_scale,
-    natural_step,
+    tolerances,
 )
 
 #: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
@@ -63,7 +54,7 @@ SPARSE_FROM = 300
 PUSH_MARGIN = 0.1
 
 
-class IdaIntegrator(Integrator):
+class IdaIntegrator(IdaCallbacks, Integrator):
     """IDA on the GGL index-2 residual, one solver per configuration segment."""
 
     method = "ida"
@@ -107,17 +98,7 @@ class IdaIntegrator(Integrator):
             self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
                 (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
                 shape=(u.N, u.N))}
-        # The works (J) are in the error test loosely (ATOL_WORK). IDA's norm is a mean
-        # over all N unknowns, so nw more with small errors would loosen the test on the
-        # motion by up to sqrt(N / (N - nw)): every other tolerance is scaled by its
-        # inverse, and the test on the motion reads as it did without them.
-        self.tol_scale = math.sqrt((u.N - u.nw) / u.N) if u.N else 1.0
-        self.rtol = opts.rtol * self.tol_scale
-        self.atol = np.concatenate([np.full(2 * u.nz, opts.atol),
-                                    np.full(u.nw, ATOL_WORK * opts.atol),
-                                    np.full(u.m, ATOL_LAMBDA), np.full(u.m, ATOL_MU)])
-        self.atol[:2 * u.nz] *= self.tol_scale
-        self.atol[u.lam.start:] *= self.tol_scale
+        self.tol_scale, self.rtol, self.atol = tolerances(u, opts.rtol, opts.atol)
         #: factor on the multipliers' absolute tolerances, from the forces at the start
         #: (set by the first segment)
         self.lambda_scale = 1.0
@@ -133,73 +114,7 @@ class IdaIntegrator(Integrator):
         self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
                               if d.motion == "table" and 0.0 < d.times[-1] < opts.t_end})
 
-    # ------------------------------------------------------------- callbacks
-    def _residual(self, t, y, yp, res):
-        if self.model.callables:  # the callable loads' values at this state
-            nq = self.model.nq
-            self.p[:] = self.model.fill(self.p, t, y[:nq], y[nq:2 * nq])
-        self.t_arr[0] = t
-        self.y_in[:] = y
-        self.yp_in[:] = yp
-        self.res.run()
-        res[:] = self.res_out
-
-    def _jacobian(self, t, y, yp, res, cj, JJ):
-        if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
-            self.jac = (Buffered(self.u.jac_sparse_fn, sparse=True) if self.sparse
-                        else Buffered(self.u.jac_fn))
-            for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.cj_arr, self.p)):
-                self.jac.bind(i, arr)
-        self.t_arr[0] = t
-        self.cj_arr[0] = cj
-        self.y_in[:] = y
-        self.yp_in[:] = yp
-        model = self.model
-        if model.callables:
-            nq = model.nq
-            self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
-        if JJ is not self._jj:  # one array per solver: bound once per segment
-            self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
-            self._jj = JJ
-        self.jac.run()
-        if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
-            dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
-            JJ[nq:2 * nq, :nq] -= dq
-            JJ[nq:2 * nq, nq:2 * nq] -= dv
-
-    def _events(self, t, y, yp, out):
-        # IDA checks the roots after every successful step (at the step's end, or at the
-        # output time when the step passed it): count steps here.
-        if t >= self.t_last and t not in self.outputs:
-            if t - self.t_last > self.crawl_step:
-                self.in_place = 0
-            else:  # a step too short to move t: IDA halving next to a singular position
-                self.in_place += 1
-                if self.in_place > IN_PLACE_STEPS:
-                    raise _CrawlError
-            self.t_last = t
-            self.n_steps += 1
-            if self.n_steps > self.step_budget:
-                raise _StalledError
-            if self.n_steps == SLOW_STEPS and t - self.t_start < self.h_natural:
-                raise _CrawlError
-            if self.opts.progress is not None:
-                self.opts.progress.update(t)
-        out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
-        if not self.triggers:
-            return
-        self.y_in[:] = y
-        self.ev_fn.run()
-        if self.has_push and (self.relaxed or self.ev_near[0] < 0.0):
-            # Lock forces: the event function reads IDA's own multipliers, which are in the
-            # error test and tell a force's sign while it is far from its threshold; near
-            # it (or with the multipliers out of the test) the values come from a KKT solve,
-            # so a root is located on the same function as always. The two agree to well
-            # under the margin, so switching between them makes no sign change of its own.
-            q, v = self.u.centroids(y[None, :])
-            self._exact_events(t, q[0], v[0])
-        out[:] = self.ev_out
-
+    # ------------------------------------------------- the event functions (callbacks: mixin)
     def _event_function(self) -> Buffered:
         """The segment's event functions as one CasADi function of y: the policy's own
         :func:`~cmm_dae.hybrid.policy.event_values` applied to symbols (one evaluation of a few
@@ -224,18 +139,6 @@ class IdaIntegrator(Integrator):
             self._ev_cache[key] = fn
         return fn
 
-    def _exact_events(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
-        """Event values with the lock forces of a KKT solve at (q, v, t)."""
-        model = self.model
-        p = model.fill(self.p, t, q, v)
-        c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
-        if model.reacting:  # friction from the reaction: the KKT system is nonlinear
-            _, lam, _ = model.kkt(q, v, t, p)
-        else:
-            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
-        ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
-
-    # ------------------------------------------------------------------ segment
     def after_events(self, transitions: list[ev.Transition]) -> None:
         last = transitions[-1].event if transitions else None
         if last is not None and last.kind == "bounce":
@@ -271,7 +174,8 @@ class IdaIntegrator(Integrator):
         opts, hs, u = self.opts, self.hs, self.u
         first_step, q, v, y0, yp0, t_stop = self._begin(t0, q, v)
         solver = self._solver(first_step)
-        tspan, extra = self._tspan(t0, t_stop)
+        tspan, extra = segment_times(self.opts, t0, t_stop)
+        self.outputs = set(tspan.tolist())  # IDA checks roots at output times too: no steps
         r = self._solve(solver, tspan, y0, yp0, first_step, t0)
         T, Y = np.asarray(r.t), np.asarray(r.y)
         failed = r.status < 0 or self.crawled  # steps in place are a failure there
@@ -469,23 +373,6 @@ class IdaIntegrator(Integrator):
                 **self.ls_options)
         return solver
 
-    def _tspan(self, t0: float, t_stop: float) -> tuple[np.ndarray, float | None]:
-        """The output times of a segment from t0 (``extra``: a midpoint to drop again)."""
-        opts = self.opts
-        outs = _output_times(opts, t0)
-        if t_stop < opts.t_end:
-            outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
-        tspan = np.concatenate([[t0], outs])
-        extra = None
-        # scikit-sundae returns IDA's internal steps for a 2-point tspan: that is what
-        # output_dt=None asks for; on a grid, a midpoint (dropped again) avoids it
-        if tspan.size == 2 and opts.output_dt is not None:
-            extra = 0.5 * (tspan[0] + tspan[1])
-            tspan = np.array([tspan[0], extra, tspan[1]])
-        # IDA evaluates the root functions at output times too: not steps
-        self.outputs = set(tspan.tolist())
-        return tspan, extra
-
     def _solve(self, solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                first_step: float, t0: float):
         """IDA's run over ``tspan`` (Python or compiled), its counts added to the stats."""
@@ -511,40 +398,3 @@ class IdaIntegrator(Integrator):
         """Ctrl-C arrived outside IDA's callbacks: the segment ends with what it has."""
         self.interrupted = True
 
-    def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
-        """Raise the absolute tolerances of positions and of velocities to the round-off
-        of their largest entry in ``y`` (:data:`ROUNDOFF_ATOL` of it) where the run's
-        atol is below it; True when that raises them by more than :data:`OUTGROWN` (with
-        ``check``: only tell, change nothing). A state that has grown so much since the
-        segment's start (the squeezer's spin-up, 1e-14 to 3e-10) is what IDA failed on;
-        a smaller rise (A02's speeds change by a few times near a singular position)
-        leaves the failure to the singular-position logic."""
-        nz = self.u.nz
-        cur = self.atol[:2 * nz]
-        new = np.empty_like(cur)
-        for blk in (slice(0, nz), slice(nz, 2 * nz)):
-            floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
-            new[blk] = np.maximum(self.opts.atol, floor) * self.tol_scale
-        raised = bool(np.any(new > OUTGROWN * cur))
-        if not check:
-            self.atol[:2 * nz] = new
-        return raised
-
-    def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
-        """:func:`~.tolerances.natural_step` of the coordinates at a consistent start."""
-        nz = self.u.nz
-        return natural_step(y0[:nz], yp0[nz:2 * nz], self.rtol / self.tol_scale,
-                            self.atol[:nz] / self.tol_scale, span)
-
-    def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
-                        first_step: float) -> csegment.SegmentRun:
-        """The segment in C: the same IDA options, residual, Jacobian and event functions
-        (compiled) as the Python path; the step budget and Ctrl-C act between chunks."""
-        fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
-                                     self.has_push)
-        r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
-                       self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
-                       fns, len(self.triggers), self.opts.progress)
-        self.n_steps = r.steps
-        self.stalled, self.interrupted = r.stalled, r.interrupted
-        return r

@@ -21,7 +21,7 @@ from ..hybrid import policy as ev
 from .contract import RunOptions
 
 __all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOFF_ATOL",
-           "SLOW_STEPS", "failure", "quiet_sundials"]
+           "SLOW_STEPS", "failure", "quiet_sundials", "segment_times"]
 
 #: A failure where the constraints' singular-value ratio is below this and falling along
 #: the motion is handed to the singular-position crossing (which says "dead point" if it
@@ -83,6 +83,23 @@ def quiet_sundials():
             yield
     finally:
         out.flush()
+
+
+def segment_times(opts: RunOptions, t0: float, t_stop: float
+                  ) -> tuple[np.ndarray, float | None]:
+    """The output times of a segment from t0 to ``t_stop`` (a break, or the end), and
+    ``extra``: a midpoint to drop again, or None."""
+    outs = _output_times(opts, t0)
+    if t_stop < opts.t_end:
+        outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
+    tspan = np.concatenate([[t0], outs])
+    extra = None
+    # scikit-sundae returns IDA's internal steps for a 2-point tspan: that is what
+    # output_dt=None asks for; on a grid, a midpoint (dropped again) avoids it
+    if tspan.size == 2 and opts.output_dt is not None:
+        extra = 0.5 * (tspan[0] + tspan[1])
+        tspan = np.array([tspan[0], extra, tspan[1]])
+    return tspan, extra
 
 
 def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,

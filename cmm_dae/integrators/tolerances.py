@@ -11,7 +11,7 @@ import numpy as np
 from ..equations.model import Model
 
 __all__ = ["ATOL_LAMBDA", "ATOL_LAMBDA_SINGULAR", "ATOL_MU", "ATOL_WORK", "FORCE_REF",
-           "lambda_atol", "lambda_scale", "natural_step"]
+           "lambda_atol", "lambda_scale", "natural_step", "tolerances"]
 
 #: Absolute tolerances on the multipliers. Both are index-2 variables of the GGL form and
 #: scikit-sundae cannot suppress them from the error test. mu (zero on the exact solution)
@@ -80,3 +80,19 @@ def natural_step(z: np.ndarray, zdd: np.ndarray, rtol: float, atol: np.ndarray |
     wt = 1.0 / (rtol * np.abs(z) + atol)
     norm = float(np.sqrt(np.mean((zdd * wt) ** 2)))
     return min(math.sqrt(2.0 / norm), 1e-3 * span) if norm > 0.0 else 0.0
+
+
+def tolerances(u, rtol: float, atol: float) -> tuple[float, float, np.ndarray]:
+    """IDA's (scale, rtol, atol vector) for the unknowns ``u`` (an
+    :class:`~cmm_dae.equations.unknowns.Unknowns`) at a run's ``rtol``, ``atol``.
+
+    The works (J) are in the error test loosely (:data:`ATOL_WORK`). IDA's norm is a mean
+    over all N unknowns, so nw more with small errors would loosen the test on the motion
+    by up to sqrt(N / (N - nw)): every other tolerance is scaled by its inverse (the
+    scale), and the test on the motion reads as it did without them."""
+    scale = math.sqrt((u.N - u.nw) / u.N) if u.N else 1.0
+    vec = np.concatenate([np.full(2 * u.nz, atol), np.full(u.nw, ATOL_WORK * atol),
+                          np.full(u.m, ATOL_LAMBDA), np.full(u.m, ATOL_MU)])
+    vec[:2 * u.nz] *= scale
+    vec[u.lam.start:] *= scale
+    return scale, rtol * scale, vec

@@ -15,7 +15,7 @@ from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..hybrid.start import start_spec
 from ..hybrid.state import SegmentTrace
-from ..integrators.ida import quiet_sundials
+from ..integrators.ida_steps import quiet_sundials
 from ..integrators.tolerances import ATOL_MU, lambda_atol, natural_step
 from ..results.result import Result
 from ..singular.step import step_over

@@ -1,0 +1,144 @@
+"""IDA's callbacks for :class:`~.ida.IdaIntegrator`: the residual and its Jacobian
+through CasADi's buffers, the root function (which also counts IDA's steps and tells a
+crawl or a stall), the lock forces from a KKT solve near their thresholds, and the
+tolerances that follow the state's round-off."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..equations.model import Buffered
+from ..hybrid import policy as ev
+from . import csegment
+from .ida_steps import (
+    IN_PLACE_STEPS,
+    OUTGROWN,
+    ROUNDOFF_ATOL,
+    SLOW_STEPS,
+    _CrawlError,
+    _StalledError,
+)
+from .tolerances import natural_step
+
+__all__ = ["IdaCallbacks"]
+
+
+class IdaCallbacks:
+    """The callbacks' half of :class:`~.ida.IdaIntegrator` (a mixin: the state they read,
+    ``model``, ``u``, ``p``, the bound arrays and the segment's counters, is the
+    integrator's)."""
+
+    def _residual(self, t, y, yp, res):
+        if self.model.callables:  # the callable loads' values at this state
+            nq = self.model.nq
+            self.p[:] = self.model.fill(self.p, t, y[:nq], y[nq:2 * nq])
+        self.t_arr[0] = t
+        self.y_in[:] = y
+        self.yp_in[:] = yp
+        self.res.run()
+        res[:] = self.res_out
+
+    def _jacobian(self, t, y, yp, res, cj, JJ):
+        if self.jac is None:  # sparse: the nonzeros in CSC order, as JJ holds them
+            self.jac = (Buffered(self.u.jac_sparse_fn, sparse=True) if self.sparse
+                        else Buffered(self.u.jac_fn))
+            for i, arr in enumerate((self.t_arr, self.y_in, self.yp_in, self.cj_arr, self.p)):
+                self.jac.bind(i, arr)
+        self.t_arr[0] = t
+        self.cj_arr[0] = cj
+        self.y_in[:] = y
+        self.yp_in[:] = yp
+        model = self.model
+        if model.callables:
+            nq = model.nq
+            self.p[:] = model.fill(self.p, t, y[:nq], y[nq:2 * nq])
+        if JJ is not self._jj:  # one array per solver: bound once per segment
+            self.jac.bind_out(0, JJ)  # transposed in the model: JJ is row-major
+            self._jj = JJ
+        self.jac.run()
+        if model.callables:  # M v' - Q = ...: the laws' own derivatives, which CasADi
+            dq, dv = model.input_jacobian(t, y[:nq], y[nq:2 * nq])  # cannot see
+            JJ[nq:2 * nq, :nq] -= dq
+            JJ[nq:2 * nq, nq:2 * nq] -= dv
+
+    def _events(self, t, y, yp, out):
+        # IDA checks the roots after every successful step (at the step's end, or at the
+        # output time when the step passed it): count steps here.
+        if t >= self.t_last and t not in self.outputs:
+            if t - self.t_last > self.crawl_step:
+                self.in_place = 0
+            else:  # a step too short to move t: IDA halving next to a singular position
+                self.in_place += 1
+                if self.in_place > IN_PLACE_STEPS:
+                    raise _CrawlError
+            self.t_last = t
+            self.n_steps += 1
+            if self.n_steps > self.step_budget:
+                raise _StalledError
+            if self.n_steps == SLOW_STEPS and t - self.t_start < self.h_natural:
+                raise _CrawlError
+            if self.opts.progress is not None:
+                self.opts.progress.update(t)
+        out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
+        if not self.triggers:
+            return
+        self.y_in[:] = y
+        self.ev_fn.run()
+        if self.has_push and (self.relaxed or self.ev_near[0] < 0.0):
+            # Lock forces: the event function reads IDA's own multipliers, which are in the
+            # error test and tell a force's sign while it is far from its threshold; near
+            # it (or with the multipliers out of the test) the values come from a KKT solve,
+            # so a root is located on the same function as always. The two agree to well
+            # under the margin, so switching between them makes no sign change of its own.
+            q, v = self.u.centroids(y[None, :])
+            self._exact_events(t, q[0], v[0])
+        out[:] = self.ev_out
+
+    def _exact_events(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Event values with the lock forces of a KKT solve at (q, v, t)."""
+        model = self.model
+        p = model.fill(self.p, t, q, v)
+        c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
+        if model.reacting:  # friction from the reaction: the KKT system is nonlinear
+            _, lam, _ = model.kkt(q, v, t, p)
+        else:
+            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
+        ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
+
+    def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
+        """Raise the absolute tolerances of positions and of velocities to the round-off
+        of their largest entry in ``y`` (:data:`ROUNDOFF_ATOL` of it) where the run's
+        atol is below it; True when that raises them by more than :data:`OUTGROWN` (with
+        ``check``: only tell, change nothing). A state that has grown so much since the
+        segment's start (the squeezer's spin-up, 1e-14 to 3e-10) is what IDA failed on;
+        a smaller rise (A02's speeds change by a few times near a singular position)
+        leaves the failure to the singular-position logic."""
+        nz = self.u.nz
+        cur = self.atol[:2 * nz]
+        new = np.empty_like(cur)
+        for blk in (slice(0, nz), slice(nz, 2 * nz)):
+            floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
+            new[blk] = np.maximum(self.opts.atol, floor) * self.tol_scale
+        raised = bool(np.any(new > OUTGROWN * cur))
+        if not check:
+            self.atol[:2 * nz] = new
+        return raised
+
+    def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
+        """:func:`~.tolerances.natural_step` of the coordinates at a consistent start."""
+        nz = self.u.nz
+        return natural_step(y0[:nz], yp0[nz:2 * nz], self.rtol / self.tol_scale,
+                            self.atol[:nz] / self.tol_scale, span)
+
+    def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
+                        first_step: float) -> csegment.SegmentRun:
+        """The segment in C: the same IDA options, residual, Jacobian and event functions
+        (compiled) as the Python path; the step budget and Ctrl-C act between chunks."""
+        fns = self.c.event_functions(self.ev_key, self.ev_fn.fn, self.hs, self.triggers,
+                                     self.has_push)
+        r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
+                       self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
+                       fns, len(self.triggers), self.opts.progress)
+        self.n_steps = r.steps
+        self.stalled, self.interrupted = r.stalled, r.interrupted
+        return r
