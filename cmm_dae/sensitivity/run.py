@@ -202,9 +202,9 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
         End time, s.
     error_control : bool
         Keep the position and velocity sensitivities in IDA's error test (scaled by each
-        parameter's size, as IDAS does). Off by default: the sensitivities are then held to
-        a tolerance 1000 times looser (``sensitivity_pass.LOOSE``), which kept the cost near a plain
-        run's where full error control took 110 times the residual evaluations (a
+        parameter's size, as IDAS does). Off by default: the sensitivities are then held
+        to a tolerance 1000 times looser (``sensitivity.ida_pass.LOOSE``), which kept the
+        cost near a plain run's where full error control took 110 times the residual evaluations (a
         redesigned double-folded mechanism with a soft spring at D).
     rtol, atol, output_dt, **run_options
         As for :func:`cmm_dae.run_dae`.
