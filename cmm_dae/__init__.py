@@ -19,7 +19,7 @@ from .core.errors import (
     SolverError,
     Status,
 )
-from .core.records import Configuration, Event, EventKind, Stats
+from .core.records import Configuration, Event, EventKind, Side, Stats
 from .description.library import example, examples
 from .description.loader import from_dict, load
 from .description.mechanism import (
@@ -60,7 +60,7 @@ __all__ = [
     "Friction", "from_dict", "Gear", "Group", "Initial", "Joint", "labeller", "Law", "Limits",
     "load", "Load",
     "load_result", "Mechanism", "Model", "ModelError", "Problem", "Result", "run_dae",
-    "run_iterative", "Sensitivities", "sensitivities", "simulate", "SolverError", "Spring",
+    "run_iterative", "Sensitivities", "sensitivities", "Side", "simulate", "SolverError", "Spring",
     "Stats", "Status", "Structure",
     "structure", "sweep", "Target", "SweepTable", "with_params", "work_precision", "WorkPrecision",
     "Zone",

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-__all__ = ["Configuration", "Event", "EventKind", "Stats"]
+__all__ = ["Configuration", "Event", "EventKind", "Side", "Stats"]
 
 
 class EventKind(StrEnum):
@@ -24,6 +24,20 @@ class EventKind(StrEnum):
     SINGULAR = "singular"  #: a singular position passed
     LANDING = "landing"  #: a unilateral contact met its curve and holds (an impact)
     LIFT_OFF = "lift-off"  #: a unilateral contact let go (its force would pull)
+
+
+class Side(StrEnum):
+    """An :class:`Event`'s (and a trigger's) ``side``; equal to the plain string."""
+
+    LOWER = "lower"  #: a joint's lower limit (a unilateral contact's curve)
+    UPPER = "upper"  #: its upper limit
+    STICK = "stick"  #: held by static friction
+    POSITIVE = "positive"  #: slipping towards +c
+    NEGATIVE = "negative"  #: slipping towards -c
+    ENTER = "enter"  #: a load's zone entered
+    LEAVE = "leave"  #: a load's zone left
+    CONTINUE = "continue"  #: a singular position passed on the branch of the motion
+    NONE = ""  #: a trigger without a side (a zone, a slipping joint's rate)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.records import Event, EventKind
+from ..core.records import Event, EventKind, Side
 from ..equations.kkt import impact_map
 from .state import (
     HybridState,
@@ -33,7 +33,7 @@ def _begin_slip(hs: HybridState, t: float, joint: str, force: float, before: int
     hs.stick_at.pop(joint, None)
     hs.slip = {**hs.slip, joint: s}
     return Event(t=t, kind=EventKind.SLIP, joint=joint,
-                 side="positive" if s > 0 else "negative", before=before,
+                 side=Side.POSITIVE if s > 0 else Side.NEGATIVE, before=before,
                  after=hs.current(), velocity_before=rate, velocity_after=rate,
                  release_force=float(force))
 
@@ -69,7 +69,7 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
         hs.stick_at.pop(joint, None)
         hs.slip = {**slip, joint: s}
         return Transition(Event(t=t, kind=EventKind.SLIP, joint=joint,
-                                side="positive" if s > 0 else "negative", before=before,
+                                side=Side.POSITIVE if s > 0 else Side.NEGATIVE, before=before,
                                 after=hs.current(), velocity_before=float(cd[k]),
                                 velocity_after=float(cd[k]),
                                 note="the drivers move this joint through rest: the "
@@ -84,7 +84,7 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     if abs(force) <= hs.static(joint, lam):
         hs.locked = trial
         lost = float(0.5 * np.sum(model.mass * (v**2 - v0**2)))
-        return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side="stick",
+        return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
                                 before=before, after=hs.current(),
                                 velocity_before=float(cd[k]), velocity_after=0.0,
                                 impulses=impulses(model, imp), energy_lost=lost,

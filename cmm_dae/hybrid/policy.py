@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from ..core.records import Event, EventKind
+from ..core.records import Event, EventKind, Side
 from ..equations.kinematics import (
     dependent_rows,
     project_positions,
@@ -37,6 +37,7 @@ from .state import (
     SegmentTrace,
     Transition,
     Trigger,
+    TriggerKind,
     impulses,
     joint_acceleration,
     joint_rate,
@@ -44,11 +45,15 @@ from .state import (
 )
 from .zones import _zone_margin, initial_zones, pick, zone_switch
 
+TK = TriggerKind
+#: the triggers that read a lock's force (a KKT solve's multipliers)
+LOCK_FORCES = (TK.PUSH, TK.SLIP)
+
 # The names callers reach as ``events.X`` (the policy's vocabulary), whichever module holds
 # them.
 __all__ = [
     "ZENO_DT", "HybridState", "LockUpError", "Policy", "SegmentTrace", "Transition",
-    "Trigger", "at_limit",
+    "LOCK_FORCES", "Trigger", "TriggerKind", "at_limit",
     "confirm", "crossings", "dependent_rows", "event_list", "event_values", "handle",
     "impact_map", "initial_zones", "over_constrained", "project_positions",
     "project_velocities", "release", "resting_rate", "start_triggers", "stick_or_slip",
@@ -62,19 +67,19 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
     """The triggers watched in configuration ``locked``: a ``gap`` for each open limit side
     of an unlocked joint, a ``push`` for each locked joint, a ``zone`` for each load that
     acts in a zone (``joint`` holds the load's name). All cross zero downwards."""
-    out = [Trigger(name, "", "zone") for name in model.zoned]
+    out = [Trigger(name, Side.NONE, TK.ZONE) for name in model.zoned]
     for name in model.locks:
         if name in locked:
-            kind = "slip" if locked[name] == "stick" else "push"
-            out.append(Trigger(name, locked[name], kind))
+            kind = TK.SLIP if locked[name] == Side.STICK else TK.PUSH
+            out.append(Trigger(name, Side(locked[name]), kind))
             continue
         lim = model.mech.joints[name].stops
         if lim is not None and lim.lower is not None:
-            out.append(Trigger(name, "lower", "gap"))
+            out.append(Trigger(name, Side.LOWER, TK.GAP))
         if lim is not None and lim.upper is not None:
-            out.append(Trigger(name, "upper", "gap"))
+            out.append(Trigger(name, Side.UPPER, TK.GAP))
         if model.mech.joints[name].friction is not None:
-            out.append(Trigger(name, "", "rate"))  # a slipping joint's rate
+            out.append(Trigger(name, Side.NONE, TK.RATE))  # a slipping joint's rate
     return out
 
 
@@ -91,13 +96,13 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
     symbolic ``c``, ``cdot``, ``lam`` (``out`` a list) it builds IDA's event function."""
     jidx = hs.model.jidx
     for i, tr in enumerate(triggers):
-        if tr.kind == "zone":
+        if tr.kind == TK.ZONE:
             out[i] = _zone_margin(hs, tr.joint, c, cdot, where)
-        elif tr.kind == "rate":  # positive while it slips on in its direction
+        elif tr.kind == TK.RATE:  # positive while it slips on in its direction
             out[i] = hs.slip.get(tr.joint, 0) * cdot[jidx[tr.joint]]
-        elif tr.kind == "slip":  # positive while the stuck joint carries less than Fs
+        elif tr.kind == TK.SLIP:  # positive while the stuck joint carries less than Fs
             out[i] = hs.static(tr.joint, lam) - abs(hs.push(lam, tr.joint))
-        elif tr.kind == "gap":
+        elif tr.kind == TK.GAP:
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
             if tr.side == "lower":
@@ -124,15 +129,15 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
         return []
     if values is None:
         c, cd = model.joint_rates(q, v)
-        needs_lam = any(tr.kind in ("push", "slip") for tr in triggers)
+        needs_lam = any(tr.kind in (TK.PUSH, TK.SLIP) for tr in triggers)
         lam = model.kkt(q, v, t, hs.p)[1] if needs_lam else None
         values = np.empty(len(triggers))
         event_values(hs, c, cd, lam, triggers, values)
     out = []
     for tr, val in zip(triggers, values, strict=True):
-        if tr.kind == "gap":
+        if tr.kind == TK.GAP:
             crossed = val < -1e-12 * (1.0 + abs(hs.limit_value(tr.joint, tr.side)))
-        elif tr.kind in ("push", "slip"):
+        elif tr.kind in (TK.PUSH, TK.SLIP):
             crossed = val < 0.0 and hs.stayed.get(tr.joint) != t
         else:
             crossed = val < 0.0
@@ -185,7 +190,7 @@ def zone_edges(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
         return []
     c, cd = model.joint_rates(q, v)
     return [tr for tr in event_list(model, hs.locked)
-            if tr.kind == "zone" and _zone_margin(hs, tr.joint, c, cd) <= 0.0]
+            if tr.kind == TK.ZONE and _zone_margin(hs, tr.joint, c, cd) <= 0.0]
 
 
 def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
@@ -196,9 +201,9 @@ def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float
     or when it arrives at (almost) zero speed and the stop would not push (the joint is
     leaving); a push is rejected when the joint is no longer locked, a gap when it is
     locked already (an earlier event of the same instant changed it)."""
-    if tr.kind in ("push", "slip"):
+    if tr.kind in (TK.PUSH, TK.SLIP):
         return hs.locked.get(tr.joint) == tr.side
-    if tr.kind == "rate":
+    if tr.kind == TK.RATE:
         return tr.joint in hs.slip
     if tr.joint in hs.locked:
         return False
@@ -216,7 +221,7 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
            policy: Policy) -> list[Transition]:
     """Decide what a trigger does and apply it to ``hs``; returns the transitions in order
     (none when the trigger is rejected or the joint stays locked)."""
-    if tr.kind == "zone":
+    if tr.kind == TK.ZONE:
         done = zone_switch(hs, tr.joint, q, v, t)
         if done is None:
             return []
@@ -225,17 +230,17 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
         # rather than crossing it, so no root finder would report it: check here.
         out = [done]
         for nxt in crossings(hs, done.q, done.v, t):
-            if nxt.kind in ("push", "slip"):
+            if nxt.kind in (TK.PUSH, TK.SLIP):
                 out += handle(hs, nxt, done.q, done.v, t, policy)
         return out
     if not confirm(hs, tr, q, v, t, policy):
         return []
-    if tr.kind == "gap":
+    if tr.kind == TK.GAP:
         return at_limit(hs, q, v, t, tr.joint, tr.side, policy)
-    if tr.kind == "rate":
+    if tr.kind == TK.RATE:
         return [stick_or_slip(hs, q, v, t, tr.joint)]
     force = hs.lock_force(q, v, t, tr.joint)
-    if tr.kind == "slip":
+    if tr.kind == TK.SLIP:
         return [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)]
     if would_reenter(hs, q, v, t, tr.joint, tr.side) and \
             t - hs.stayed.get(tr.joint, -math.inf) > ZENO_DT:

@@ -11,12 +11,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
 from ..core.errors import SolverError, Status
-from ..core.records import Configuration, Event
+from ..core.records import Configuration, Event, Side
 from ..equations import rank, reaction
 from ..equations.model import Model
 
@@ -35,14 +36,25 @@ class LockUpError(SolverError):
         super().__init__(message, status=Status.LOCK_UP)
 
 
+class TriggerKind(StrEnum):
+    """What a :class:`Trigger` watches (equal to the plain string)."""
+
+    GAP = "gap"  #: an unlocked joint's distance to its ``side`` stop
+    PUSH = "push"  #: a locked joint's stop force (it would have to pull)
+    SLIP = "slip"  #: a stuck joint's margin to static friction
+    RATE = "rate"  #: a slipping joint's rate (it comes to rest)
+    ZONE = "zone"  #: a zoned load's margin to its zone's edge (``joint``: the load)
+
+
 @dataclass(frozen=True)
 class Trigger:
-    """What an integrator detected: ``kind`` ``"gap"`` (an unlocked joint reached its
-    ``side`` limit) or ``"push"`` (the stop of a locked joint would have to pull)."""
+    """What an integrator watches and detects: an event function of the policy
+    (:func:`~cmm_dae.hybrid.policy.event_values`), of ``kind`` at ``joint`` (a zoned
+    load's name for a zone) on ``side``."""
 
     joint: str
-    side: str
-    kind: str
+    side: Side
+    kind: TriggerKind
 
 
 @dataclass(frozen=True)

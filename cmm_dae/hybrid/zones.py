@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.records import Event, EventKind
+from ..core.records import Event, EventKind, Side
 from ..equations.model import Model
 from .state import HybridState, Transition
 
@@ -61,7 +61,7 @@ def zone_switch(hs: HybridState, load: str, q: np.ndarray, v: np.ndarray, t: flo
     hs.zones = hs.zones | {load} if inside else hs.zones - {load}
     name = model.joint_names[k]
     return Transition(Event(t=t, kind=EventKind.ZONE, joint=name,
-                            side="enter" if inside else "leave", before=before,
+                            side=Side.ENTER if inside else Side.LEAVE, before=before,
                             after=hs.current(), velocity_before=float(cd[k]),
                             velocity_after=float(cd[k]), load=load), q, v)
 

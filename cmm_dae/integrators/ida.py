@@ -273,7 +273,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         first_step, self.first_step = self.first_step, 0.0
         self.triggers = ev.event_list(model, hs.locked)
         self.push_idx = np.array([i for i, tr in enumerate(self.triggers)
-                                  if tr.kind in ("push", "slip")], dtype=int)
+                                  if tr.kind in ev.LOCK_FORCES], dtype=int)
         self.has_push = self.push_idx.size > 0
         self.ev_out = np.zeros(1 + len(self.triggers))  # [always positive, triggers]
         self.ev_near = np.zeros(1)
