@@ -51,7 +51,9 @@ class _Scene:
         pts += [np.asarray(list(meta["ground"].values()), float).reshape(-1, 2)]
         self._extent(pts)
         self.guides = [self._guide(j) for j in meta.get("axes", {})]
-        self.rays = [r for j in meta.get("limits", {}) if j not in meta.get("axes", {})
+        # (a contact's limits are the ends of its curve, drawn with it)
+        self.rays = [r for j in meta.get("limits", {})
+                     if j not in meta.get("axes", {}) and j not in meta.get("curves", {})
                      for r in self._rays(j)]
         self.curves = [self._curve(j) for j in meta.get("curves", {})]
         self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides]
@@ -175,7 +177,7 @@ class _Scene:
                       for b in self.tracks}
         marks = {j: ax.plot([], [], "s", ms=11, mfc="none", mew=2.5, zorder=4)[0]
                  for j in self.markers}
-        title = ax.set_title("", fontsize=9)
+        title = ax.set_title("\n", fontsize=9)  # two lines: room kept by tight_layout
         if self.markers:
             ax.plot([], [], "s", mfc="none", mew=2.5, color="red", label="locked joint")
             ax.plot([], [], "s", mfc="none", mew=2.5, color="green", label="free joint")
