@@ -167,18 +167,23 @@ def test_cam_follower_sensitivities_through_lift_off_and_landing(path):
     """d t_event / d p through three lift-offs and landings against central differences
     (h 1e-5 relative, runs at rtol 1e-12): within 2e-6 of the largest derivative
     (measured 5e-8, 4e-7, 2e-8)."""
-    from cmm_dae.description.params import param_value
-
     mech = cam_mechanism()
     s = cd.sensitivities(mech, [path], 0.5, rtol=1e-11)
     kinds = [e.kind for e in s.result.events]
     assert kinds.count("landing") == 3 and kinds.count("lift-off") == 4
+    fd = _fd_event_times(mech, path, 0.5)
+    assert np.max(np.abs(s.event_times[:, 0] - fd)) <= 2e-6 * np.max(np.abs(fd))
+
+
+def _fd_event_times(mech: cd.Mechanism, path: str, t_end: float) -> np.ndarray:
+    """d t_event / d p by central differences (h 1e-5 relative, runs at rtol 1e-12)."""
+    from cmm_dae.description.params import param_value
+
     x0 = param_value(mech, path)
     h = 1e-5 * abs(x0)
-    ts = [np.array([e.t for e in cd.run_dae(cd.with_params(mech, {path: x}), 0.5,
+    ts = [np.array([e.t for e in cd.run_dae(cd.with_params(mech, {path: x}), t_end,
                                            rtol=1e-12).events]) for x in (x0 + h, x0 - h)]
-    fd = (ts[0] - ts[1]) / (2 * h)
-    assert np.max(np.abs(s.event_times[:, 0] - fd)) <= 2e-6 * np.max(np.abs(fd))
+    return (ts[0] - ts[1]) / (2 * h)
 
 
 # ------------------------------------------------------------------ bilateral contacts
@@ -195,6 +200,15 @@ def slot_pendulum(limits=None) -> cd.Mechanism:
                 cd.Joint("K", "contact", "ground.O", "slider.P", side="inside",
                          curve=cd.Curve("circle", radius=RS), limits=limits)],
         initial=cd.Initial(joints={"A": -math.pi / 2 + 1.0}))
+
+
+def slot_with_friction() -> cd.Mechanism:
+    """The slot pendulum with friction mu |N| in the slot (mu_s 0.25, mu_k 0.2)."""
+    mech = slot_pendulum()
+    slot = mech.joints["K"]
+    return mech.replace(joints={**mech.joints, "K": cd.Joint(
+        "K", "contact", slot.first, slot.second, side="inside", curve=slot.curve,
+        friction=cd.Friction(mu_static=0.25, mu_kinetic=0.2))})
 
 
 def _pendulum(t_end: float, **kw):
@@ -259,12 +273,7 @@ def test_friction_in_a_slot_from_its_contact_force():
     with phi'^2: the seven reversals within 1e-8 s of the reference (measured 8e-12 s), the
     angle within 1e-8 rad (1e-10), the energy audit within 1e-8 J (4.6e-10) of 3 J lost
     to friction."""
-    mech = slot_pendulum()
-    slot = mech.joints["K"]
-    mech = mech.replace(joints={**mech.joints, "K": cd.Joint(
-        "K", "contact", slot.first, slot.second, side="inside", curve=slot.curve,
-        friction=cd.Friction(mu_static=0.25, mu_kinetic=0.2))})
-    res = cd.run_dae(mech, 6.0, rtol=1e-11, output_dt=0.01)
+    res = cd.run_dae(slot_with_friction(), 6.0, rtol=1e-11, output_dt=0.01)
     turns, angle = _slot_reference(0.25, 0.2, 6.0)
     slips = [e for e in res.events if e.kind == "slip" and e.t > 0]
     assert len(slips) == len(turns) == 7
@@ -470,18 +479,8 @@ def test_slot_friction_sensitivities_through_reversals(path):
     """d t_reversal / d p through the slot friction's slips (mu |N|, N the contact force)
     against central differences (h 1e-5 relative, rtol 1e-12): within 1e-5 of the largest
     derivative (measured 1.4e-6 and 1.6e-6)."""
-    from cmm_dae.description.params import param_value
-
-    mech = slot_pendulum()
-    slot = mech.joints["K"]
-    mech = mech.replace(joints={**mech.joints, "K": cd.Joint(
-        "K", "contact", slot.first, slot.second, side="inside", curve=slot.curve,
-        friction=cd.Friction(mu_static=0.25, mu_kinetic=0.2))})
+    mech = slot_with_friction()
     s = cd.sensitivities(mech, [path], 3.0, rtol=1e-11)
     assert [e.kind for e in s.result.events].count("slip") == 4
-    x0 = param_value(mech, path)
-    h = 1e-5 * abs(x0)
-    ts = [np.array([e.t for e in cd.run_dae(cd.with_params(mech, {path: x}), 3.0,
-                                           rtol=1e-12).events]) for x in (x0 + h, x0 - h)]
-    fd = (ts[0] - ts[1]) / (2 * h)
+    fd = _fd_event_times(mech, path, 3.0)
     assert np.max(np.abs(s.event_times[:, 0] - fd)) <= 1e-5 * np.max(np.abs(fd))
