@@ -28,10 +28,18 @@ def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str
     curve = None
     if "curve" in d:
         ct = r.keys(f"{t}.curve", r.sub(t, d, "curve"), keys_of("joints", "curve"))
+        pts = ct.get("points", [])
+        if not (isinstance(pts, list) and all(
+                isinstance(x, list) and len(x) == 2 and all(
+                    isinstance(c, int | float) and not isinstance(c, bool) for c in x)
+                for x in pts)):
+            r.bad(f"{t}.curve", "points", f"expected a list of [x, y] numbers, got {pts!r:.60}")
+            pts = []
         curve = Curve(r.choice(f"{t}.curve", ct, "kind", CURVES) or "circle",
                       r.num(f"{t}.curve", ct, "radius", default("joints", "radius", "curve")),
                       r.vec(f"{t}.curve", ct, "direction", 2,
-                            default=default("joints", "direction", "curve")))
+                            default=default("joints", "direction", "curve")),
+                      tuple(tuple(x) for x in pts))
     elif jtype == "contact":
         r.bad(t, "curve", "missing (expected { kind = \"circle\", radius = R } or "
               "{ kind = \"line\", direction = [x, y] })")

@@ -14,7 +14,7 @@ GROUND = "ground"
 JOINT_TYPES = ("revolute", "prismatic", "contact")
 
 
-CURVES = ("circle", "line")
+CURVES = ("circle", "line", "spline")
 
 
 SIDES = ("outside", "inside")
@@ -102,6 +102,28 @@ def _friction_problems(t: str, j) -> list[Problem]:
                            "reaction is mu |N|: it has no radius"))
     return out
 
+def _spline_problems(t: str, j) -> list[Problem]:
+    """A spline curve: at least 4 points, counter-clockwise once around its origin, none
+    at it; for a unilateral contact (its gap is radial)."""
+    import numpy as np
+
+    c = j.curve
+    if not j.unilateral:
+        return [Problem(t, "curve", "a spline curve is for a unilateral contact (a cam and "
+                        "its follower) in this version; a slot needs a circle or a line")]
+    if len(c.points) < 4 or not all(_finite(x) for p in c.points for x in p):
+        return [Problem(t, "curve.points", "expected at least 4 points [x, y] (m)")]
+    ang, rad = c.polar()
+    if np.min(rad) <= 0.0:
+        return [Problem(t, "curve.points", "a point lies at the curve's origin (the first "
+                        "connect point); the points go around it")]
+    if not (np.all(np.diff(ang) > 0.0) and ang[-2] - ang[0] < 2 * math.pi):
+        return [Problem(t, "curve.points", "expected the points counter-clockwise once "
+                        "around the curve's origin, each at a larger polar angle than the "
+                        "one before")]
+    return []
+
+
 def _contact_problems(t: str, j) -> list[Problem]:
     """A contact joint's curve, side and stops."""
     out: list[Problem] = []
@@ -118,6 +140,8 @@ def _contact_problems(t: str, j) -> list[Problem]:
                                    and math.hypot(*c.direction) > 1e-12):
         out.append(Problem(t, "curve.direction", "expected a non-zero direction, got "
                            f"{c.direction}"))
+    elif c.kind == "spline":
+        out += _spline_problems(t, j)
     if j.side not in SIDES:
         out.append(Problem(t, "side", f"expected one of {', '.join(SIDES)}, got {j.side!r}"))
     if not isinstance(j.unilateral, bool):

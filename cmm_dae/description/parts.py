@@ -68,16 +68,36 @@ class Curve:
     """The curve of a contact joint, in its first body's frame, through the first
     connect point (its origin).
 
-    kind : {"circle", "line"}
+    kind : {"circle", "line", "spline"}
         ``circle``: centred on the origin point, of ``radius`` (m); its arc length is
         measured counter-clockwise from the body's x axis, ``radius * atan2`` in
         (-pi radius, pi radius]. ``line``: through the origin point along ``direction``
         (normalised on use); its arc length is the distance along it from the origin.
+        ``spline``: a closed curve through ``points`` (m, relative to the origin point,
+        counter-clockwise once around it, each ray from it meeting the curve once): its
+        radius is the periodic cubic spline through the points' radii over their polar
+        angles (a cam profile); for unilateral contacts, whose gap is then the radial
+        distance ``|d| - r(angle of d)``.
     """
 
-    kind: Literal["circle", "line"] = "circle"
+    kind: Literal["circle", "line", "spline"] = "circle"
     radius: float = 0.0
     direction: Vec2 = (1.0, 0.0)
+    points: tuple[Vec2, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", tuple(
+            (float(x), float(y)) for x, y in self.points))
+
+    def polar(self) -> tuple:
+        """A spline's knots: polar angles (increasing, from the first point's, spanning one
+        turn; the first repeated a turn later) and radii (m)."""
+        import numpy as np
+
+        pts = np.asarray(self.points, float)
+        ang = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
+        rad = np.hypot(pts[:, 0], pts[:, 1])
+        return np.append(ang, ang[0] + 2 * math.pi), np.append(rad, rad[0])
 
 
 @dataclass(frozen=True)

@@ -122,13 +122,18 @@ SPEC: dict[str, Table] = {
         "curve": Key("table", "contact only: the first body's curve, in its frame through the "
                      "first point", keys={
                          "kind": Key("choice", "circle (centred on the point; arc length "
-                                     "radius atan2 from the body's x axis) or line (through "
-                                     "the point; arc length along `direction`)",
+                                     "radius atan2 from the body's x axis), line (through "
+                                     "the point; arc length along `direction`) or spline "
+                                     "(a closed curve through `points`)",
                                      choices=CURVES),
                          "radius": Key("number", "circle: radius", "m", minimum=0.0,
                                        default=0.0),
                          "direction": Key("vector2", "line: direction in the first body's "
-                                          "frame", default=[1.0, 0.0])},
+                                          "frame", default=[1.0, 0.0]),
+                         "points": Key("points", "spline: points [[x, y], ...] relative to "
+                                       "the first point, counter-clockwise once around "
+                                       "it (a cam profile; unilateral contacts)", "m",
+                                       default=[])},
                      default=None),
         "side": Key("choice", "contact only: the side of the curve the point keeps to (a "
                     "circle's outside or inside; left or right of a line's direction)",
@@ -263,6 +268,9 @@ def _json(k: Key) -> dict:
         s = {"type": "array", "items": num, "minItems": n, "maxItems": n}
     elif k.kind == "numbers":
         s = {"type": "array", "items": num}
+    elif k.kind == "points":
+        s = {"type": "array", "items": {"type": "array", "items": num, "minItems": 2,
+                                        "maxItems": 2}}
     elif k.kind == "strings2":
         s = {"type": "array", "items": {"type": "string"}, "minItems": 2, "maxItems": 2}
     elif k.kind == "pair":
@@ -340,7 +348,7 @@ def _type_text(k: Key) -> str:
     return {"number": "number", "string": "string", "vector2": "[x, y]",
             "vector3": "[x, y, theta]", "boolean": "true \\| false",
             "numbers": "list of numbers",
-            "pair": "two strings", "strings2": "two strings",
+            "pair": "two strings", "strings2": "two strings", "points": "list of [x, y]",
             "paths": "\"position\" or list of strings",
             "table": "inline table", "map": f"table of name = {k.of.replace('vector2', '[x, y]')}",
             "choice": " \\| ".join(f"`{c}`" for c in k.choices)}[k.kind]

@@ -41,11 +41,31 @@ def contact_gap_arc(j, d, theta1) -> tuple:
         r = ca.sqrt(ca.dot(dl, dl))
         gap = r - c.radius
         arc = c.radius * ca.atan2(dl[1], dl[0])
+    elif c.kind == "spline":  # radial gap to a periodic cubic spline r(angle)
+        gap = ca.sqrt(ca.dot(dl, dl)) - _spline_radius(c, ca.atan2(dl[1], dl[0]))
+        arc = ca.atan2(dl[1], dl[0])  # (unused: a spline's contact is unilateral)
     else:
         u = np.array(c.direction, float) / math.hypot(*c.direction)
         gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction
         arc = u[0] * dl[0] + u[1] * dl[1]
     return (gap if j.side == "outside" else -gap), arc
+
+
+def _spline_radius(c, phi):
+    """The periodic cubic spline through a spline curve's knots at the polar angle
+    ``phi`` (CasADi), piece by piece: the angle is brought into the knots' turn first
+    (the spline is C2 across the turn's ends, so the jump of the angle does not show)."""
+    from scipy.interpolate import CubicSpline
+
+    ang, rad = c.polar()
+    spl = CubicSpline(ang, rad, bc_type="periodic")
+    x = ang[0] + ca.fmod(ca.fmod(phi - ang[0], 2 * math.pi) + 2 * math.pi, 2 * math.pi)
+    out = ca.SX(0)
+    for i in reversed(range(ang.size - 1)):  # the last piece first: nested from the end
+        s = x - ang[i]
+        piece = ((spl.c[0, i] * s + spl.c[1, i]) * s + spl.c[2, i]) * s + spl.c[3, i]
+        out = piece if i == ang.size - 2 else ca.if_else(x < ang[i + 1], piece, out)
+    return out
 
 
 def _rot(th):

@@ -5,11 +5,14 @@ a failure."""
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import io
 import logging
 import math
+import os
 import re
 import sys
+import tempfile
 from types import SimpleNamespace
 
 import numpy as np
@@ -46,7 +49,8 @@ def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
 
 # the logger users know (cmm_dae.integrators.ida), where these helpers lived first
 _LOG = logging.getLogger("cmm_dae.integrators.ida")
-_SUNDIALS_LINE = re.compile(r"^\[\w+, Error: -?\d+\]")
+# scikit-sundae's reports of SUNDIALS' failures, and SUNDIALS' own logger's lines
+_SUNDIALS_LINE = re.compile(r"^\[(\w+, Error: -?\d+|WARNING|ERROR)\]")
 
 
 class _SundialsOut(io.TextIOBase):
@@ -74,14 +78,66 @@ class _SundialsOut(io.TextIOBase):
         self.part = ""
 
 
+def _libc_fflush():
+    """C's ``fflush(NULL)``, where the C library can be reached (else nothing)."""
+    try:
+        return ctypes.CDLL(None).fflush
+    except (OSError, AttributeError):  # pragma: no cover - not a POSIX C library
+        return None
+
+
+_FFLUSH = _libc_fflush()
+_CAPTURE: list = []  # one temporary file, reused, that takes C's stdout while IDA runs
+
+
 @contextlib.contextmanager
 def quiet_sundials():
-    """A context in which SUNDIALS' own messages go to the logger, not to stdout."""
+    """A context in which SUNDIALS' own messages go to the logger, not to stdout: those
+    scikit-sundae prints (Python's stdout) and those SUNDIALS' C logger writes straight
+    to file descriptor 1 ("[WARNING] ... root functions identically 0" after a lift-off);
+    any other output passes through to the real stdout."""
     out = _SundialsOut(sys.stdout)
+    fd = _redirect_fd1()
     try:
         with contextlib.redirect_stdout(out):
             yield
     finally:
+        out.flush()
+        _restore_fd1(fd, out)
+
+
+def _redirect_fd1() -> int | None:
+    """Point file descriptor 1 at the capture file; the saved descriptor (None where that
+    is not possible)."""
+    if _FFLUSH is None:
+        return None
+    try:
+        sys.stdout.flush()
+        _FFLUSH(None)
+        if not _CAPTURE:
+            _CAPTURE.append(tempfile.TemporaryFile())  # noqa: SIM115 (kept for the process)
+        saved = os.dup(1)
+        os.dup2(_CAPTURE[0].fileno(), 1)
+        return saved
+    except (OSError, ValueError, io.UnsupportedOperation):
+        return None
+
+
+def _restore_fd1(saved: int | None, out: _SundialsOut) -> None:
+    """Back to the saved stdout; what C wrote meanwhile sorted as :class:`_SundialsOut`
+    sorts Python's."""
+    if saved is None:
+        return
+    _FFLUSH(None)
+    os.dup2(saved, 1)
+    os.close(saved)
+    cap = _CAPTURE[0]
+    cap.seek(0)
+    text = cap.read().decode(errors="replace")
+    cap.seek(0)
+    cap.truncate()
+    if text:
+        out.write(text if text.endswith("\n") else text + "\n")
         out.flush()
 
 
