@@ -165,3 +165,17 @@ def test_gears_on_different_carriers_are_refused():
 def test_sensitivities_refuse_gears_by_name():
     with pytest.raises(cd.ModelError, match=r"gear pairs \(Z\) are not supported yet"):
         cd.sensitivities(gear_pair(), ["bodies.gb.inertia"], 0.1)
+
+
+def test_animation_draws_the_pitch_circles():
+    """The animation's scene holds each gear's pitch circle about its axle: radii 3 and
+    6 cm for the 9-cm centre distance at ratio -0.5 (to 1e-12 m)."""
+    from cmm_dae.report.animation import _Scene
+
+    res = cd.run_dae(gear_pair(), 0.05, output_dt=0.01)
+    circles = _Scene(res, 4).curves
+    assert len(circles) == 2
+    for ring, centre, radius in zip(circles, ((0.0, 0.0), (0.09, 0.0)), (0.03, 0.06),
+                                    strict=True):
+        dist = np.hypot(ring[..., 0] - centre[0], ring[..., 1] - centre[1])
+        assert np.allclose(dist, radius, rtol=0, atol=1e-12)

@@ -3,9 +3,10 @@
 Bodies are drawn as polygons through their points, ground points as triangles, the guide
 of each prismatic joint as a grey line with its stops as bars, the stops of a limited
 revolute joint as dashed rays (where the second body's link lies at each limit), the curve
-of each contact joint (a circle, or the stretch of a line the point runs on) as a brown
-line, and every metamorphic joint as a square, red while locked and green while free. The
-artists are created once and only moved from frame to frame.
+of each contact joint (a circle, or the stretch of a line the point runs on) and the pitch
+circles of gear pairs as brown lines, and every metamorphic joint as a square, red while
+locked and green while free. The artists are created once and only moved from frame to
+frame.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ class _Scene:
                      if j not in meta.get("axes", {}) and j not in meta.get("curves", {})
                      for r in self._rays(j)]
         self.curves = [self._curve(j) for j in meta.get("curves", {})]
+        self.curves += [c for g in meta.get("gear_pairs", {}).values() for c in self._pitch(g)]
         self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides]
                      + [c.reshape(-1, 2) for c in self.curves])
 
@@ -129,6 +131,28 @@ class _Scene:
         if b1 == "ground":
             return np.broadcast_to(local, (self.idx.size, *local.shape))
         return np.stack([self.world(b1, xy) for xy in local], axis=1)
+
+    def _pitch(self, gear: list) -> list[np.ndarray]:
+        """A gear pair's pitch circles (frames, 73, 2) about its axles (a pinion's alone
+        beside a rack)."""
+        meta = self.res.meta
+        first, second, ratio = gear
+        types = {j: j in meta.get("axes", {}) for j in (first, second)}  # prismatic?
+
+        def centre(j: str) -> np.ndarray:
+            body, pt = meta["connects"][j][1].split(".", 1)
+            return self.world(body, self._local(body, pt))
+
+        ang = np.linspace(0.0, 2.0 * math.pi, 73)
+        ring = np.column_stack([np.cos(ang), np.sin(ang)])
+        if not any(types.values()):
+            a, b = centre(first), centre(second)
+            dist = np.hypot(*(b - a).T)[:, None, None]
+            rb = dist / (1.0 + abs(ratio))
+            return [a[:, None, :] + (dist - rb) * ring, b[:, None, :] + rb * ring]
+        pinion = first if types[second] else second
+        radius = abs(ratio) if types[second] else 1.0 / abs(ratio)
+        return [centre(pinion)[:, None, :] + radius * ring]
 
     def _rays(self, j: str) -> list[np.ndarray]:
         """Dashed rays (frames, 2, 2): where the second body's link lies at each limit."""

@@ -237,6 +237,7 @@ def _meta(model: Model) -> dict:
                      for n, e in mech.elements.items()},
         "loads": model.load_names,
         "gears": list(mech.gears),
+        "gear_pairs": {n: [g.first, g.second, g.ratio] for n, g in mech.gears.items()},
         "frictional": model.frictional,
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},
