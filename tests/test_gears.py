@@ -56,21 +56,25 @@ def test_gear_pair_motion_tooth_force_and_bearings():
     assert np.allclose(it.joint("A").acceleration, alpha, rtol=1e-9)
 
 
-def test_rack_and_pinion():
-    """A pinion (radius 5 cm, motor 1 N m) driving a 2 kg rack against a 5 N push: the
-    rack force m a - push along the guide, the teeth pushing the rack off the pinion by
-    tan(pressure angle) of it, the guide's normal force and moment balancing them."""
-    rp, mr, Ip = 0.05, 2.0, 1e-3
-    mech = cd.Mechanism(
+def rack_and_pinion() -> cd.Mechanism:
+    rp = 0.05
+    return cd.Mechanism(
         "rack", ground={"P": (0.0, 0.0), "G": (0.0, -rp)},
-        bodies=[cd.Body("pinion", 0.3, Ip, points={"O": (0, 0)}),
-                cd.Body("rack", mr, 0.05, points={"R": (0, 0)}, guess=(0.0, -rp, 0.0))],
+        bodies=[cd.Body("pinion", 0.3, 1e-3, points={"O": (0, 0)}),
+                cd.Body("rack", 2.0, 0.05, points={"R": (0, 0)}, guess=(0.0, -rp, 0.0))],
         joints=[cd.Joint("P", "revolute", "ground.P", "pinion.O"),
                 cd.Joint("X", "prismatic", "ground.G", "rack.R")],
         gears=[cd.Gear("Z", "P", "X", ratio=-rp)], initial=cd.Initial(joints={"P": 0.0}),
         loads=[cd.Load("motor", cd.Law(value=1.0), joint="P"),
                cd.Load("push", cd.Law(value=5.0), joint="X")])
-    res = cd.run_dae(mech, 0.3, rtol=1e-10, output_dt=0.05)
+
+
+def test_rack_and_pinion():
+    """A pinion (radius 5 cm, motor 1 N m) driving a 2 kg rack against a 5 N push: the
+    rack force m a - push along the guide, the teeth pushing the rack off the pinion by
+    tan(pressure angle) of it, the guide's normal force and moment balancing them."""
+    rp, mr, Ip = 0.05, 2.0, 1e-3
+    res = cd.run_dae(rack_and_pinion(), 0.3, rtol=1e-10, output_dt=0.05)
     alpha = (1.0 - rp * 5.0) / (Ip + rp**2 * mr)
     assert np.allclose(res.joint("P").acceleration, alpha, rtol=1e-9)
     ft = mr * (-rp * alpha) - 5.0
@@ -162,9 +166,26 @@ def test_gears_on_different_carriers_are_refused():
                              "B": cd.Joint("B", "revolute", "ga.O", "gb.O")})
 
 
-def test_sensitivities_refuse_gears_by_name():
-    with pytest.raises(cd.ModelError, match=r"gear pairs \(Z\) are not supported yet"):
-        cd.sensitivities(gear_pair(), ["bodies.gb.inertia"], 0.1)
+@pytest.mark.parametrize(("build", "path", "joints"), [
+    (gear_pair, "bodies.gb.inertia", ("A", "B")), (gear_pair, "bodies.ga.inertia", ("A", "B")),
+    (rack_and_pinion, "bodies.rack.mass", ("P", "X"))])
+def test_sensitivities_of_the_bearing_loads(build, path, joints):
+    """d/dp of both joints' forces (the tooth force included: an axle's bearing, a rack's
+    guide) against central differences (h 1e-6 relative, rtol 1e-12): within 1e-6 of the
+    largest derivative."""
+    from cmm_dae.description.params import param_value
+
+    mech = build()
+    s = cd.sensitivities(mech, [path], 0.1, rtol=1e-11, output_dt=0.02)
+    x0 = param_value(mech, path)
+    h = 1e-6 * abs(x0)
+    runs = [cd.run_dae(cd.with_params(mech, {path: x}), 0.1, rtol=1e-12, output_dt=0.02)
+            for x in (x0 + h, x0 - h)]
+    for joint in joints:
+        fd = (runs[0].joint(joint).force - runs[1].joint(joint).force) / (2 * h)
+        got = s.joint(joint).force[..., 0]
+        assert np.max(np.abs(fd)) > 1.0
+        assert np.max(np.abs(got - fd)) <= 1e-6 * np.max(np.abs(fd))
 
 
 def test_animation_draws_the_pitch_circles():

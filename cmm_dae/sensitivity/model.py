@@ -12,6 +12,7 @@ import numpy as np
 
 from ..description.mechanism import GROUND
 from ..equations import reaction
+from ..equations.gearing import tooth
 from ..equations.kkt import blocks as kkt_blocks
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
@@ -124,6 +125,15 @@ class Equations:
                 fy.append(-F[1])
                 d = rb - ref
                 tq.append(-(Mc + (d[0] * F[1] - d[1] * F[0])))
+        # gear pairs: their tooth forces in the axles' bearing loads, as post-processing
+        def angle(body):
+            return q[3 * model.bidx[body] + 2]
+
+        for name in model.mech.gears:
+            _, fixes = tooth(model, name, lam[model.rows_of("gear", name)[0]],
+                             lambda k: (Pts[0, k], Pts[1, k]), angle, ca.if_else, ca.sign)
+            for k, dfx, dfy, dm in fixes:
+                fx[k], fy[k], tq[k] = fx[k] - dfx, fy[k] - dfy, tq[k] - dm
         eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
         force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
         return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, *tq, *eff)

@@ -217,8 +217,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     ------
     ModelError
         A path that is not a numeric parameter of the mechanism or has no effect (named),
-        or a mechanism the sensitivities are not defined for (callable load laws, gear
-        pairs: not yet).
+        or a mechanism the sensitivities are not defined for (callable load laws).
         With redundant constraints the joint forces and torques are minimum-norm
         reactions: their derivatives are NaN (said in ``notes``).
     CmmError
@@ -235,10 +234,6 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
                                  f"along an IDA run only (method=\"ida\"), got "
                                  f"{run_options['method']!r}"))
     run_options.pop("method", None)
-    if mech.gears:  # its bearing forces take the tooth forces post-processing rebuilds
-        raise ModelError(Problem("sensitivities", "gears", "sensitivities of a mechanism "
-                                 f"with gear pairs ({', '.join(mech.gears)}) are not "
-                                 "supported yet"), mech.source)
     paths = check_params(mech, params)
     if atol is None and isinstance(rtol, float | int):
         atol = 1e-2 * rtol  # as for a run
