@@ -53,19 +53,18 @@ def _positive_int(text: str) -> int:
     return n
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
-                                 "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
-                                 "against the paper's fixed-step iterative algorithm.")
-    sub = ap.add_subparsers(dest="command", required=True)
+def _common(p: argparse.ArgumentParser, model_help: str = "mechanism TOML file or the "
+            "name of a shipped example (cmm-dae examples lists them)") -> None:
+    """The arguments every simulating command takes: the model, the end time, progress."""
+    p.add_argument("model", help=model_help)
+    p.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    p.add_argument("--progress", action="store_true",
+                   help="progress bar of the simulated time on stderr")
 
-    def common(p, model_help="mechanism TOML file or the name of a shipped example "
-               "(cmm-dae examples lists them)"):
-        p.add_argument("model", help=model_help)
-        p.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
-        p.add_argument("--progress", action="store_true",
-                       help="progress bar of the simulated time on stderr")
 
+def _simulating(sub) -> None:
+    """``run``, ``iterate``, ``compare``."""
+    common = _common
     r = sub.add_parser("run", help="simulate a model with IDA and print a summary")
     common(r)
     r.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance (1e-8)")
@@ -103,6 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--force", action="store_true", help="overwrite an existing report")
     c.set_defaults(func=_compare)
 
+def _viewing(sub) -> None:
+    """``events``, ``structure``, ``animate``, ``plot``."""
     e = sub.add_parser("events", help="event table of a model run or of a saved result")
     e.add_argument("source", help="model file or example name, or a saved result (.npz)")
     e.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
@@ -127,6 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
     p.add_argument("--force", action="store_true", help="overwrite existing PNGs")
     p.set_defaults(func=_plot)
+
+def _studies(sub) -> None:
+    """``sweep``, ``sensitivities``, ``design``, ``examples``, ``schema``, ``bench``."""
+    common = _common
     sw = sub.add_parser("sweep", help="parameter sweep (local processes or a Dask cluster)")
     sw.add_argument("model", help="model file or example name")
     sw.add_argument("--param", action="append", default=[], metavar="PATH=A:B:N",
@@ -182,6 +187,16 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--loops", type=int, nargs="+", default=[1, 8, 32],
                     help="with --peers: loop counts (1 8 32)")
     bn.set_defaults(func=_bench)
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="cmm-dae", description="Constrained metamorphic "
+                                 "mechanisms: index-reduced DAE on SUNDIALS IDA, checked "
+                                 "against the paper's fixed-step iterative algorithm.")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    _simulating(sub)
+    _viewing(sub)
+    _studies(sub)
     return ap
 
 

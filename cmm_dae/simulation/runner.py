@@ -35,13 +35,10 @@ from ..results.result import Result
 from .cache import model_of
 from .crossing import cross_singular, log_stepped_over
 from .options import IDA_DEFAULTS, ITERATIVE_DEFAULTS, branch_rule, check_options
-from .passage import passage_cut, watch_segment
+from .passage import drop_twin_passage, passage_cut, watch_segment
 
 #: The integration methods, by name.
 METHODS: dict[str, type[Integrator]] = {"ida": IdaIntegrator, "iterative": IterativeIntegrator}
-
-#: Two records of a singular instant closer than this (relative to the time, s) are one.
-TWIN_INSTANT = 1e-6
 
 _BLAS = None
 
@@ -164,35 +161,8 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
     """The run; ``trace`` (a list) receives the start state and one
     :class:`~cmm_dae.hybrid.SegmentTrace` per segment (for :mod:`cmm_dae.sensitivity`)."""
     wall0 = time.perf_counter()
-    mech, eq_values = solve_equilibrium(mech)
-    if any(not p.startswith("initial.") for p in eq_values):
-        model = None  # the solved parameters are compiled into the model: build it anew
-    try:
-        if model is None:  # built (or kept) without its redundant rows
-            model = model_of(mech, _build)
-        elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
-            model = _without_redundant(model)
-        build = time.perf_counter() - wall0
-        hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
-        q, v, events = start_state(model, hs)
-        model.kkt(q, v, 0.0, hs.p)  # the accelerations must be determined at the start
-    except CmmError:
-        raise
-    except np.linalg.LinAlgError as e:
-        point = [n for n, b in mech.bodies.items() if b.inertia == 0.0]
-        if point:
-            raise AssemblyError(
-                f"the accelerations at t = 0 are undetermined: the rotation of point mass "
-                f"{', '.join(repr(n) for n in point)} (inertia 0) is not fixed by its joints; "
-                "give it an inertia or a second joint that fixes its angle",
-                joints=[]) from e
-        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
-    except MemoryError as e:
-        raise _out_of_memory(mech, e) from e
-    except (ArithmeticError, ValueError, RuntimeError) as e:
-        if "bad_alloc" in str(e) or "out of memory" in str(e).lower():
-            raise _out_of_memory(mech, e) from e  # CasADi's allocation failures
-        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    mech, eq_values, model, hs, q, v, events = _start(mech, model)
+    build = time.perf_counter() - wall0
     stats = Stats(build_time=build, method=cls.method)
     rec = Recorder()
     rec.add(0.0, q, v, hs.current())
@@ -260,7 +230,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry,
                                           stalled, -math.inf if stalled else t_seg)
                 if len(events) > n_events:
-                    _drop_twin_passage(events, after, passed, cr)
+                    drop_twin_passage(events, after, passed, cr)
                 t, q, v = cr.t_after, cr.q, cr.v
                 if seg is not None:
                     seg.crossing, seg.crossing_logged = cr, len(events) > n_events
@@ -279,11 +249,56 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         status, err = Status.NUMERICAL, e
         message = (f"numerical failure after t = {rec.last_t:.9g} s (the last state kept): "
                    f"{type(e).__name__}: {e}")
+    return _finish(model, hs, rec, events, after, stats, integ, opts, wall0, eq_values,
+                   status, message, err, throw)
+
+
+def _start(mech: Mechanism, model: Model | None) -> tuple:
+    """The run's start: an ``[initial] equilibrium`` solved, the model (built, reused or the
+    caller's without its redundant rows), the hybrid state and the consistent initial
+    state with the locks it starts in; (mech, solved values, model, hs, q, v, events).
+    Failures are :class:`AssemblyError`s that say why."""
+    mech, eq_values = solve_equilibrium(mech)
+    if any(not p.startswith("initial.") for p in eq_values):
+        model = None  # the solved parameters are compiled into the model: build it anew
+    try:
+        if model is None:  # built (or kept) without its redundant rows
+            model = model_of(mech, _build)
+        elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
+            model = _without_redundant(model)
+        hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
+        q, v, events = start_state(model, hs)
+        model.kkt(q, v, 0.0, hs.p)  # the accelerations must be determined at the start
+    except CmmError:
+        raise
+    except np.linalg.LinAlgError as e:
+        point = [n for n, b in mech.bodies.items() if b.inertia == 0.0]
+        if point:
+            raise AssemblyError(
+                f"the accelerations at t = 0 are undetermined: the rotation of point mass "
+                f"{', '.join(repr(n) for n in point)} (inertia 0) is not fixed by its joints; "
+                "give it an inertia or a second joint that fixes its angle",
+                joints=[]) from e
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    except MemoryError as e:
+        raise _out_of_memory(mech, e) from e
+    except (ArithmeticError, ValueError, RuntimeError) as e:
+        if "bad_alloc" in str(e) or "out of memory" in str(e).lower():
+            raise _out_of_memory(mech, e) from e  # CasADi's allocation failures
+        raise AssemblyError(f"the initial state cannot be computed: {e}") from e
+    return mech, eq_values, model, hs, q, v, events
+
+
+def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], stats: Stats,
+            integ: Integrator, opts: RunOptions, wall0: float, eq_values: dict,
+            status: Status, message: str, err: BaseException | None, throw: bool) -> Result:
+    """The Result of the run so far (post-processed), with how IDA ran in its meta; raised
+    inside a :class:`SolverError` where the run failed and ``throw`` asks for it."""
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
                        stats, status, message, np.array(after, int), rec.works())
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
     # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
-    res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if cls.method == "ida"
+    res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if integ.method == "ida"
                               else None)
     # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
     # falls back to the Python path where it cannot be built)
@@ -300,6 +315,8 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                           configuration=hs.configurations[hs.current()],
                           last_event=events[-1] if events else None) from err
     return res
+
+
 
 
 def _apply(done: list, t: float, q: np.ndarray, v: np.ndarray, events: list, rec: Recorder,
@@ -339,23 +356,6 @@ def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:
     return CmmError(f"out of memory while building the equations of {mech.name!r} "
                     f"({len(mech.bodies)} bodies, {len(mech.joints)} joints): "
                     f"{type(e).__name__}: {e}. Free memory or simulate a smaller mechanism")
-
-
-def _drop_twin_passage(events: list, after: list[int], passed: list[tuple[float, int]],
-                       cr) -> None:
-    """A singular position IDA integrated through (found in its samples) and then, IDA
-    failing right after it, crossed from its last state: one instant, logged once, by the
-    crossing (A02 at rtol 1e-8 with IDA's own steps logged 1.2152617825 s twice, 2e-11 s
-    apart). The passage's event, its sample index and its entry in ``passed`` go."""
-    # the same instant to well within what either finds it to (the passage on the
-    # samples' interpolant, the crossing along its Gauss steps); two singular positions a
-    # microsecond apart are one event to any integrator
-    if not passed or abs(passed[-1][0] - cr.t_singular) > TWIN_INSTANT * max(1.0, cr.t_after):
-        return
-    t_p = passed.pop()[0]
-    i = next(i for i in range(len(events) - 2, -1, -1)
-             if events[i].kind == "singular" and events[i].t == t_p)
-    del events[i], after[i]
 
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = IDA_DEFAULTS["rtol"],
