@@ -159,12 +159,16 @@ class Joint(_TwoPoints):
         return 0 if self.unilateral else 1
 
     @property
+    def lands(self) -> bool:
+        """A unilateral contact: its stop is its curve, its lock a landing, its release a
+        lift-off."""
+        return self.type == "contact" and self.unilateral
+
+    @property
     def stops(self) -> Limits | None:
         """Where the joint's coordinate meets a stop: its ``limits``, or for a unilateral
         contact the curve itself (gap 0)."""
-        if self.type == "contact" and self.unilateral:
-            return Limits(lower=0.0)
-        return self.limits
+        return Limits(lower=0.0) if self.lands else self.limits
 
 
 @dataclass(frozen=True)

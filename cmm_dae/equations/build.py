@@ -42,8 +42,8 @@ def contact_gap_arc(j, d, theta1) -> tuple:
         gap = r - c.radius
         arc = c.radius * ca.atan2(dl[1], dl[0])
     elif c.kind == "spline":  # radial gap to a periodic cubic spline r(angle)
-        gap = ca.sqrt(ca.dot(dl, dl)) - _spline_radius(c, ca.atan2(dl[1], dl[0]))
-        arc = ca.atan2(dl[1], dl[0])  # (unused: a spline's contact is unilateral)
+        arc = ca.atan2(dl[1], dl[0])  # its polar angle (a spline's contact is unilateral)
+        gap = ca.sqrt(ca.dot(dl, dl)) - _spline_radius(c, arc)
     else:
         u = np.array(c.direction, float) / math.hypot(*c.direction)
         gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction

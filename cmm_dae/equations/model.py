@@ -31,7 +31,6 @@ from .build import (  # noqa: F401 (model.Row and the records, as before)
     Constraints,
     JointCoords,
     Row,
-    contact_gap_arc,
 )
 from .codegen import Buffered, compile_functions
 from .unknowns import Unknowns, ground_pins

@@ -338,7 +338,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         if joint in hs.slip:  # it slides back the other way
             hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
-    kind = EventKind.BOUNCE if bounce else EventKind.LANDING if _unilateral(model, joint) \
+    kind = EventKind.BOUNCE if bounce else EventKind.LANDING if model.mech.joints[joint].lands \
         else EventKind.LOCK if abs(cdm) <= policy.v_lock else EventKind.LIMIT
     out.append(Transition(Event(t=t, kind=kind, joint=joint, side=side, before=before,
                                 after=hs.current(), velocity_before=cdm, velocity_after=cdp,
@@ -348,12 +348,6 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         if force < 0.0:  # the stop would have to pull at once: no chattering
             out.append(Transition(release(hs, q, v_plus, t, joint, force), q, v_plus))
     return out
-
-
-def _unilateral(model: Model, joint: str) -> bool:
-    """A unilateral contact, whose lock is a landing and whose release a lift-off."""
-    j = model.mech.joints[joint]
-    return j.type == "contact" and j.unilateral
 
 
 def _rise(hs: HybridState, q: np.ndarray, v_plus: np.ndarray, t: float, joint: str,
@@ -377,7 +371,7 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
     if hs.model.mech.joints[joint].friction is not None:
         hs.slip = {**hs.slip, joint: away}
     cdv = joint_rate(hs.model, q, v, joint)
-    kind = EventKind.LIFT_OFF if _unilateral(hs.model, joint) else EventKind.RELEASE
+    kind = EventKind.LIFT_OFF if hs.model.mech.joints[joint].lands else EventKind.RELEASE
     return Event(t=t, kind=kind, joint=joint, side=side, before=before,
                  after=hs.current(), velocity_before=cdv, velocity_after=cdv,
                  release_force=float(force))

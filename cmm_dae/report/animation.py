@@ -57,7 +57,7 @@ class _Scene:
                      if j not in meta.get("axes", {}) and j not in meta.get("curves", {})
                      for r in self._rays(j)]
         self.curves = [self._curve(j) for j in meta.get("curves", {})]
-        self.curves += [c for g in meta.get("gear_pairs", {}).values() for c in self._pitch(g)]
+        self.curves += [c for g in meta.get("gears", {}).values() for c in self._pitch(g)]
         self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides]
                      + [c.reshape(-1, 2) for c in self.curves])
 

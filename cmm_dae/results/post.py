@@ -236,8 +236,8 @@ def _meta(model: Model) -> dict:
         "elements": {n: [e.stiffness, e.rest, e.damping, e.preload]
                      for n, e in mech.elements.items()},
         "loads": model.load_names,
-        "gears": list(mech.gears),
-        "gear_pairs": {n: [g.first, g.second, g.ratio] for n, g in mech.gears.items()},
+        # gear pairs by name: their joints and ratio (drawings)
+        "gears": {n: [g.first, g.second, g.ratio] for n, g in mech.gears.items()},
         "frictional": model.frictional,
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},
