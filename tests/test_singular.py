@@ -27,6 +27,14 @@ def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
     # the cranks pass the horizontal twice in 1.3 s (0.708 s and 1.215 s for N = 1)
     assert len(sing) == 2 and all(e.side == "continue" for e in sing)
     assert f"rank drop {n}," in sing[0].note
+    # every loop is singular at once: the event names all 3n + 1 joints (the rows of all
+    # n collapsing singular values; the last one's alone named a mix that changed with
+    # the instant's last digits), "G0, ..., and k more" past twelve
+    for e in sing:
+        named = re.search(r"constraints of (.*) dependent", e.note).group(1)
+        more = re.search(r"and (\d+) more$", named)
+        count = len(named.split(", ")) + (int(more.group(1)) if more else 0)
+        assert count == 3 * n + 1, e.note
     # the output grid goes on through the crossings' windows (they recorded only their
     # end before: a 0.3 s gap at rtol 1e-12)
     assert np.max(np.diff(res.t)) <= 0.01 + 1e-12

@@ -178,10 +178,13 @@ def row_names(labels: list[str], limit: int = 12) -> str:
 
 
 def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
-                   tol: float = 1e-6) -> tuple[list[str], float]:
+                   tol: float = 1e-6, drop: int = 1) -> tuple[list[str], float]:
     """Constraint rows that (nearly) depend on each other at q: the joints, drivers and
     locks of a dead point or a lock-up. Returns (labels, smallest/largest singular value);
-    no labels when the rows are independent."""
+    no labels when the rows are independent. ``drop``: how many singular values collapse
+    there (:func:`rank_drop`); the rows are those of all their left singular vectors (with
+    32 collapsing at once, as on a chain of 32 loops, the last vector alone is any mix of
+    them, and which rows it named changed with the instant's last digits)."""
     act = model.active_rows(p)
     J = model.constraints(q, t, p).Phi_q[act]
     U, s, _ = np.linalg.svd(J)
@@ -190,7 +193,8 @@ def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     ratio = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
     if ratio > tol:
         return [], ratio
-    w = np.abs(U[:, -1])
+    k = min(J.shape)
+    w = np.linalg.norm(U[:, max(k - drop, 0):k], axis=1)
     labels = []
     for i in np.flatnonzero(w > 0.05 * w.max()):
         r = model.rows[act[i]]

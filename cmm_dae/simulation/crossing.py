@@ -136,9 +136,9 @@ def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
     model, p, cfg = hs.model, hs.p, hs.current()
     logged = []
     for ps, k, q_s, v_s, r0 in stepped_over(model, p, t, q, v, rec, n0, end):
-        labels, _ = dependent_rows(model, q_s, ps.t, p, tol=1.0)
         # against the ratio r0 at the sample the passage's search started from
         drop = rank_drop(model, q_s, ps.t, p, r0)
+        labels, _ = dependent_rows(model, q_s, ps.t, p, tol=1.0, drop=drop)
         speed = float(np.linalg.norm(v_s))
         events.append(_event(ps.t, labels, drop, ps.ratio, "IDA integrated through it "
                              "within its error test (found afterwards in its samples, the "

@@ -362,6 +362,8 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     # counted where the Gauss steps reach the instant (the second-order path ahead is
     # off there by its error, enough to miss most of a large rank drop)
     drop = rank_drop(model, ends[nsub][1] if nsub >= 1 else path(tau), t_s, p, r0)
+    if drop > 1:  # the rows of every collapsing singular value, not of the last alone
+        labels = dependent_rows(model, q, t, p, tol=1.0, drop=drop)[0]
     if not past:  # the instant along the Gauss steps, not the second-order path ahead
         t_s = singular_instant(model, p, ends, t_s)
     elif t_s > 0.0 and not leaving:  # behind: one Gauss step back twice as far brackets it
