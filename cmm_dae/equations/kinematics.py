@@ -9,6 +9,7 @@ import scipy.sparse.linalg as spl
 from scipy.linalg import solve_triangular
 
 from . import rank
+from .build import Constraints
 from .model import Model
 from .unknowns import ground_pins
 
@@ -75,7 +76,10 @@ def _augmented_lu(J: np.ndarray):
     ri, ci = np.nonzero(J)  # row-major: J's rows in order
     if ri.size > SPARSE_FILL * J.size:
         return None
-    cj, rj = np.nonzero(J.T)  # J's columns in order (rj: their rows)
+    # J's columns in order (rj: their rows, ascending in each): np.nonzero(J.T)'s order,
+    # without a second scan of the dense J
+    order = np.argsort(ci, kind="stable")
+    cj, rj = ci[order], ri[order]
     per_col = np.bincount(cj, minlength=n) + 1
     per_row = np.bincount(ri, minlength=m)
     indptr = np.concatenate([[0], np.cumsum(np.concatenate([per_col, per_row]))])
@@ -102,8 +106,9 @@ def _augmented_lu(J: np.ndarray):
 
 
 def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarray,
-            rcond: float | None) -> np.ndarray:
-    """Minimum-norm Newton iterations onto the rows ``act``."""
+            rcond: float | None) -> tuple[np.ndarray, Constraints | None]:
+    """Minimum-norm Newton iterations onto the rows ``act``: q, and the constraints
+    evaluated at that q (None when the iterations ran out after a last correction)."""
     # round-off in the constraint values grows with the coordinates' size (7e-15 m on
     # A02 with 40 loops, whose pivots reach x = 40 m): a fixed 1e-15 was never met there
     # and every projection ran all its iterations
@@ -115,14 +120,14 @@ def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarra
         r = con.phi[act]
         r_max = float(np.max(np.abs(r), initial=0.0))
         if r_max < tol or (r_max < 10 * tol and not r_max < r_prev):
-            break  # met, or no longer falling at round-off level
+            return q, con  # met, or no longer falling at round-off level
         # the last factorization while it still converges fast (a simplified Newton
         # step); a new one where it did not shrink the residual tenfold
         if solver is None or not r_max < 0.1 * r_prev:
             solver = MinNorm(con.Phi_q[act], rcond)
         r_prev = r_max
         q = q - solver.solve(r)
-    return q
+    return q, None
 
 
 def project_state(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
@@ -131,26 +136,29 @@ def project_state(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.nd
     constraints: Newton on the positions, then the velocities' linear correction with the
     Jacobian at the projected positions (``rcond``: singular values below it relative to
     the largest count as zero, for a projection at a singular position)."""
-    q = project_positions(model, q, t, p, rcond)
+    q, con = _newton(model, q, t, p, model.active_rows(p), rcond)
     # a fresh factorization, not the Newton iteration's last one: next to a singular
     # position the Jacobian's pseudo-inverse is large and the last correction moves it
-    # (reusing it left A02 N = 1 over 20 s at rtol 1e-10 8.1e-6 -> 1.9e-5 m off)
-    return q, project_velocities(model, q, v, t, p, rcond)
+    # (reusing it left A02 N = 1 over 20 s at rtol 1e-10 8.1e-6 -> 1.9e-5 m off); the
+    # constraints at the projected q, where Newton evaluated them last, are reused
+    return q, project_velocities(model, q, v, t, p, rcond, con)
 
 
 def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray,
                       rcond: float | None = None) -> np.ndarray:
     """Minimal-norm Newton projection of q onto the active position constraints
     (``rcond`` as in :func:`project_state`)."""
-    return _newton(model, q, t, p, model.active_rows(p), rcond)
+    return _newton(model, q, t, p, model.active_rows(p), rcond)[0]
 
 
 def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
-                       rcond: float | None = None) -> np.ndarray:
+                       rcond: float | None = None, con: Constraints | None = None
+                       ) -> np.ndarray:
     """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows; ``rcond``
-    as in :func:`project_state`)."""
+    as in :func:`project_state`; ``con``: the constraints at (q, t) where known)."""
     act = model.active_rows(p)
-    con = model.constraints(q, t, p)
+    if con is None:
+        con = model.constraints(q, t, p)
     J = con.Phi_q[act]
     return v - MinNorm(J, rcond).solve(J @ v + con.Phi_t[act])
 
