@@ -98,6 +98,28 @@ def test_a02_n40_crosses_where_ida_gives_up_close_to_the_instant():
         assert seg.t1 == seg.crossing.t0 == res.t[seg.n1 - 1]
 
 
+@pytest.mark.slow  # about 10 s on one core
+def test_a02_n48_crosses_both_singular_positions_of_a_long_chain():
+    """A02 with 48 loops: the singular-value ratio is 0.01 at its best and falls at
+    0.045 / s, so the crossing from where IDA gave up (ratio 1e-4) kept its Gauss nodes
+    above NODE_RATIO with one 0.1-s step (velocities off by 1e-4: a dead point), and the
+    retry from 0.22 s back stepped through the first instant unseen: one event of two,
+    "success". Both instants against their quadrature; the crank tip against the
+    reference solution."""
+    n = 48
+    res = cd.run_dae(iftomm.a02_four_bar(n), 1.3)
+    assert res.success
+    sing = [e for e in res.events if e.kind == "singular"]
+    assert len(sing) == 2
+    inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
+    for e, target in zip(sing, (0.0, -math.pi), strict=True):
+        t_ref = quad(lambda p: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(p)))),
+                     target, math.pi / 2, epsabs=1e-14, epsrel=1e-13)[0]
+        assert abs(e.t - t_ref) <= 5e-8  # measured 3e-9 and 1.1e-8 s
+    err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(n, res.t)).T))
+    assert err <= 5e-7  # measured 3.9e-8 m (2 s)
+
+
 def test_change_point_four_bar_is_driven_through_its_change_point(tmp_path):
     """s + l = p + q: at the change point all four links lie on one line; the driven
     crank goes on and the linkage follows on the branch of its motion."""

@@ -15,7 +15,7 @@ from ..core.records import Event, EventKind
 from ..equations.kinematics import dependent_rows, rank_drop, row_names
 from ..hybrid import policy as ev
 from ..integrators.contract import Integrator, Recorder, RunOptions, SegmentEnd
-from ..singular.step import Crossing, step_over
+from ..singular.step import FINE_NODE_RATIO, NODE_RATIO, Crossing, step_over
 from .passage import stepped_over
 
 #: A crossing whose velocities jump by more than this times rtol (relative) is tried again
@@ -40,9 +40,10 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     ``t_min``: that segment's start (s); an instant IDA stepped across lies after it.
     Returns the crossing and, where it started from that earlier state, the number of
     samples kept before it (the segment now ends there), else None."""
-    def cross(t: float, q: np.ndarray, v: np.ndarray) -> Crossing:
+    def cross(t: float, q: np.ndarray, v: np.ndarray, node_ratio: float = NODE_RATIO
+              ) -> Crossing:
         return step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
-                         atol=opts.atol, t_min=t_min)
+                         atol=opts.atol, t_min=t_min, node_ratio=node_ratio)
 
     first: Crossing | None = None
     try:
@@ -61,9 +62,19 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
         if cut is not None and cut[1].t < t:
             with contextlib.suppress(SolverError):  # the first stands, or its error
                 second = cross(cut[1].t, cut[1].q, cut[1].v)
+            if second is not None and second.instant and \
+                    second.t_singular > t + (t - cut[1].t):
+                # not the instant IDA gave up next to but one beyond it: from far back (a
+                # long chain's ratio is low everywhere: A02 with 48 loops restarted 0.22 s
+                # back) the Gauss steps went through that instant unseen, and the run
+                # went on with one event fewer
+                second = None
         if second is not None and (first is None or second.velocity_jump < first.velocity_jump):
             cr, kept = second, cut[0]
             rec.truncate(kept)  # the samples IDA took beyond the new start
+        elif first is None:  # the last resort: from where IDA gave up, nodes nearer
+            with contextlib.suppress(SolverError):
+                cr = cross(t, q, v, FINE_NODE_RATIO)
     if cr is None:
         raise error
     cfg = hs.current()

@@ -47,6 +47,13 @@ from .instant import singular_instant
 SUBSTEPS = 6
 #: Smallest singular-value ratio wanted at a Gauss node (fewer steps where it would be less).
 NODE_RATIO = 5e-5
+#: ... where a crossing with :data:`NODE_RATIO` failed from every start: on long chains the
+#: ratio falls so slowly (A02 with 48 loops: 0.045 / s, 0.01 at its best) that keeping the
+#: nodes above NODE_RATIO took one Gauss step of 0.1 s over the instant (velocities off by
+#: 1e-4), and every earlier start lay 0.2-0.5 s back. Nodes nearer the instant carry more
+#: of the round-off the near-singular solve amplifies (A02 with 32 loops at rtol 1e-8: the
+#: crank tip 1.6e-6 m off instead of 2.6e-7), hence only as the last resort.
+FINE_NODE_RATIO = 5e-6
 #: ... and, after a failure just past the singular instant, at least this ratio, where
 #: the integrators restart reliably.
 END_RATIO = 0.03
@@ -183,7 +190,8 @@ def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.n
 
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
               t_end: float, rule: tuple[str, int] | None = None, *, rtol: float = 1e-8,
-              atol: float = 1e-10, t_min: float = -math.inf) -> Crossing:
+              atol: float = 1e-10, t_min: float = -math.inf,
+              node_ratio: float = NODE_RATIO) -> Crossing:
     """Cross the singular position ahead of the state (t, q, v) on the branch of the motion
     (or the one just behind it that the integrator stepped across; or, where that lies
     before the segment, only carry the motion out of its neighbourhood).
@@ -208,6 +216,9 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     t_min : float
         Start of the segment that ended at t, s: a singular instant the integrator
         stepped across lies after it (one before it was crossed already).
+    node_ratio : float
+        Smallest singular-value ratio wanted at a Gauss node (:data:`NODE_RATIO`, or
+        :data:`FINE_NODE_RATIO` as a last resort).
 
     Returns
     -------
@@ -280,7 +291,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         # (the node nearest it lies 0.211 h away, where the ratio is about
         # r0 * 0.211 / nsub).
         h_ok = accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
-        nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / NODE_RATIO))
+        nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / node_ratio))
         if rule is not None or nsub >= 2:
             # A step must end at the instant itself: a branch rule is applied there, and
             # a Gauss node must not fall next to it. tau from the second-order path was
@@ -298,7 +309,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
             # collocation polynomial spans the instant; the accelerations are not
             # needed there).
             nsub = 0
-            h = (tau + 20.0 * NODE_RATIO / -rate) / GL_C[0]
+            h = (tau + 20.0 * node_ratio / -rate) / GL_C[0]
             h_ok = min(h_ok, h)
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
     # restart reliably) would take more than 100 of them: then growing ones.
