@@ -56,6 +56,57 @@ def test_gear_pair_motion_tooth_force_and_bearings():
     assert np.allclose(it.joint("A").acceleration, alpha, rtol=1e-9)
 
 
+def internal_pair(ring_first: bool) -> cd.Mechanism:
+    """A pinion of pitch radius 3 cm inside a ring gear of 9 cm: axles 6 cm apart, the
+    ring's at the origin; ``ring_first``: the ring is the first joint (ratio 3), else
+    the pinion (ratio 1/3)."""
+    pinion = ("P", cd.Body("pinion", 0.2, 1e-4, points={"O": (0, 0)}), "ground.P")
+    ring = ("R", cd.Body("ring", 0.8, 2e-3, points={"O": (0, 0)}), "ground.R")
+    a, b = (ring, pinion) if ring_first else (pinion, ring)
+    return cd.Mechanism(
+        "internal", ground={"R": (0.0, 0.0), "P": (0.06, 0.0)},
+        bodies=[a[1], b[1]],
+        joints=[cd.Joint(x[0], "revolute", x[2], f"{x[1].name}.O") for x in (a, b)],
+        gears=[cd.Gear("Z", a[0], b[0], ratio=3.0 if ring_first else 1.0 / 3.0)],
+        initial=cd.Initial(joints={a[0]: 0.0}),
+        loads=[cd.Load("motor", cd.Law(value=2.0), joint=a[0]),
+               cd.Load("brake", cd.Law(value=-1.0), joint=b[0])])
+
+
+@pytest.mark.parametrize("ring_first", [False, True])
+def test_internal_gear_pair(ring_first):
+    """A pinion inside a ring gear (ratio +z_first / z_second: both turn the same way).
+    The motion against the torque balance; the tooth force on the second gear: its moment
+    about that gear's axle is the tooth torque from the gear's own balance, it acts at the
+    pitch point (on the line of centres, 3 cm beyond the pinion's axle from the ring's),
+    and its radial part, tan(20 deg) of the tangential, pushes the pinion towards its
+    own axle (the ring away from its own); each bearing against its gear's balance;
+    energy audit. All to 1e-9 relative."""
+    r = 3.0 if ring_first else 1.0 / 3.0
+    IA, IB = (2e-3, 1e-4) if ring_first else (1e-4, 2e-3)
+    res = cd.run_dae(internal_pair(ring_first), 0.2, rtol=1e-10, output_dt=0.05)
+    first, second = ("R", "P") if ring_first else ("P", "R")
+    alpha = (2.0 + r * -1.0) / (IA + r * r * IB)
+    assert np.allclose(res.joint(first).acceleration, alpha, rtol=1e-9)
+    assert np.allclose(res.joint(second).position, r * res.joint(first).position,
+                       rtol=1e-9, atol=1e-12)
+    tau_b = IB * r * alpha + 1.0  # the teeth's torque on the second gear
+    F = res.gear("Z").force
+    pitch = np.array([0.09, 0.0])  # P: on the ring's pitch circle, beyond the pinion
+    axle_b = np.array([0.06, 0.0]) if ring_first else np.array([0.0, 0.0])
+    arm = pitch - axle_b
+    assert np.allclose(arm[0] * F[:, 1] - arm[1] * F[:, 0], tau_b, rtol=1e-9)
+    radial = F[:, 0]  # the line of centres is the x axis
+    # on the pinion (the second gear, or the reaction -F on the first) towards its axle
+    on_pinion = radial if ring_first else -radial
+    assert np.allclose(on_pinion, -abs(F[:, 1]) * math.tan(PA), rtol=1e-9)
+    assert np.allclose(res.gear("Z").magnitude, np.abs(F[:, 1]) / math.cos(PA), rtol=1e-9)
+    g, m_b, m_a = 9.81, (0.2 if ring_first else 0.8), (0.8 if ring_first else 0.2)
+    assert np.allclose(res.joint(second).force, -F + [0.0, m_b * g], rtol=1e-9, atol=1e-9)
+    assert np.allclose(res.joint(first).force, F + [0.0, m_a * g], rtol=1e-9, atol=1e-9)
+    assert abs(res.energy().residual[-1]) <= 1e-9
+
+
 def rack_and_pinion() -> cd.Mechanism:
     rp = 0.05
     return cd.Mechanism(
@@ -142,7 +193,7 @@ def test_gear_pair_from_a_file(tmp_path):
 @pytest.mark.parametrize("old, new, message", [
     ('connects = ["A", "B"]', 'connects = ["A", "C"]', r"\[joints\.Z\] connects: unknown "
      "joint 'C'"),
-    ("ratio = -0.5", "ratio = 0.5", r"\[joints\.Z\] ratio: expected a negative ratio"),
+    ("ratio = -0.5", "ratio = 1.0", r"\[joints\.Z\] ratio: expected a ratio other than 1"),
     ("ratio = -0.5", "ratio = 0.0", r"\[joints\.Z\] ratio: expected a finite non-zero"),
     ("ratio = -0.5\n", "", r"\[joints\.Z\] ratio: missing"),
     ("ratio = -0.5", "ratio = -0.5\ncurve = { kind = \"circle\", radius = 1.0 }",
@@ -168,7 +219,8 @@ def test_gears_on_different_carriers_are_refused():
 
 @pytest.mark.parametrize(("build", "path", "joints"), [
     (gear_pair, "bodies.gb.inertia", ("A", "B")), (gear_pair, "bodies.ga.inertia", ("A", "B")),
-    (rack_and_pinion, "bodies.rack.mass", ("P", "X"))])
+    (rack_and_pinion, "bodies.rack.mass", ("P", "X")),
+    (lambda: internal_pair(ring_first=True), "bodies.pinion.inertia", ("R", "P"))])
 def test_sensitivities_of_the_bearing_loads(build, path, joints):
     """d/dp of both joints' forces (the tooth force included: an axle's bearing, a rack's
     guide) against central differences (h 1e-6 relative, rtol 1e-12): within 1e-6 of the
@@ -190,7 +242,8 @@ def test_sensitivities_of_the_bearing_loads(build, path, joints):
 
 def test_animation_draws_the_pitch_circles():
     """The animation's scene holds each gear's pitch circle about its axle: radii 3 and
-    6 cm for the 9-cm centre distance at ratio -0.5 (to 1e-12 m)."""
+    6 cm for the 9-cm centre distance at ratio -0.5, 9 and 3 cm for a 6-cm one at ratio 3
+    (an internal mesh) (to 1e-12 m)."""
     from cmm_dae.report.animation import _Scene
 
     res = cd.run_dae(gear_pair(), 0.05, output_dt=0.01)
@@ -198,5 +251,11 @@ def test_animation_draws_the_pitch_circles():
     assert len(circles) == 2
     for ring, centre, radius in zip(circles, ((0.0, 0.0), (0.09, 0.0)), (0.03, 0.06),
                                     strict=True):
+        dist = np.hypot(ring[..., 0] - centre[0], ring[..., 1] - centre[1])
+        assert np.allclose(dist, radius, rtol=0, atol=1e-12)
+    # an internal mesh: the pinion's 3 cm about (0.06, 0), the ring's 9 cm about the origin
+    res = cd.run_dae(internal_pair(ring_first=True), 0.05, output_dt=0.01)
+    for ring, centre, radius in zip(_Scene(res, 4).curves, ((0.0, 0.0), (0.06, 0.0)),
+                                    (0.09, 0.03), strict=True):
         dist = np.hypot(ring[..., 0] - centre[0], ring[..., 1] - centre[1])
         assert np.allclose(dist, radius, rtol=0, atol=1e-12)

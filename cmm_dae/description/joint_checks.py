@@ -159,7 +159,8 @@ def _contact_problems(t: str, j) -> list[Problem]:
 
 def gear_problems(m: Any, t: str, g: Any) -> list[Problem]:
     """A gear pair (table ``t``): two existing joints, revolute-revolute (an external
-    mesh, ratio < 0) or revolute-prismatic, on one carrier, in a finite non-zero ratio."""
+    mesh, ratio < 0, or an internal one, ratio > 0 and not 1) or revolute-prismatic, on
+    one carrier, in a finite non-zero ratio."""
     out: list[Problem] = []
     if g.name in m.joints:
         out.append(Problem(t, "", "a gear pair and a joint share this name"))
@@ -193,10 +194,10 @@ def gear_problems(m: Any, t: str, g: Any) -> list[Problem]:
                            "ground), their first body"))
     if not (_finite(g.ratio) and g.ratio != 0.0):
         out.append(Problem(t, "ratio", f"expected a finite non-zero ratio, got {g.ratio}"))
-    elif types == ["revolute", "revolute"] and g.ratio > 0:
-        out.append(Problem(t, "ratio", f"expected a negative ratio (an external mesh turns "
-                           f"the gears opposite ways), got {g.ratio}; internal gears are "
-                           "not supported yet"))
+    elif types == ["revolute", "revolute"] and g.ratio == 1.0:
+        out.append(Problem(t, "ratio", "expected a ratio other than 1 (negative: an external "
+                           "mesh; positive: an internal one, whose gears of pitch radii "
+                           "r_a and r_b have ratio r_a / r_b; 1 would make them one size)"))
     if not (_finite(g.pressure_angle) and 0.0 <= g.pressure_angle < 1.2):
         out.append(Problem(t, "pressure_angle", "expected an angle in [0, 1.2) rad, got "
                            f"{g.pressure_angle}"))

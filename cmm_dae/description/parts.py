@@ -111,12 +111,15 @@ class Gear:
         Name of the pair (a joint name in the model file: ``[joints.NAME]``, type "gear").
     first, second : str
         The two joints: both revolute (two gears on axles held by one carrier body, or
-        the ground: an external mesh, ``ratio`` < 0), or one revolute and one prismatic (a
-        pinion and its rack, on one carrier).
+        the ground: an external mesh, ``ratio`` < 0, or a pinion inside a ring gear, an
+        internal mesh, ``ratio`` > 0), or one revolute and one prismatic (a pinion and
+        its rack, on one carrier).
     ratio : float
         Rate of the second joint over the rate of the first: rad/rad for two gears
-        (-z_first / z_second), m/rad for a rack driven by its pinion (+- the pitch
-        radius), rad/m the other way round.
+        (-z_first / z_second external, +z_first / z_second internal, not 1), m/rad for a
+        rack driven by its pinion (+- the pitch radius), rad/m the other way round. The
+        pitch radii follow from the axles' distance: r_first + r_second (external) or
+        |r_second - r_first| (internal).
     pressure_angle : float
         Angle of the line of action from the pitch circles' common tangent, rad (default
         20 degrees); the tooth force is reported along it.

@@ -108,7 +108,8 @@ SPEC: dict[str, Table] = {
                         "contact's curve passes through the first point); a gear pair: "
                         "[\"JOINT\", \"JOINT\"], its two joints"),
         "ratio": Key("number", "gear only: rate of the second joint / rate of the first "
-                     "(< 0 for two gears in external mesh; +- the pitch radius for a rack)",
+                     "(< 0 for two gears in external mesh, > 0 and not 1 for a pinion inside a "
+                     "ring gear; +- the pitch radius for a rack)",
                      "rad/rad, m/rad or rad/m", default=None),
         "pressure_angle": Key("number", "gear only: the line of action's angle from the "
                               "pitch circles' tangent (the tooth force is reported along it)",

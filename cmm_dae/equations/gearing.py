@@ -44,11 +44,19 @@ def tooth(model: Any, name: str, lam_g: Any, point: Callable[[int], tuple],
         dx, dy = bx - ax, by - ay
         dist = (dx * dx + dy * dy) ** 0.5
         ux, uy = dx / dist, dy / dist  # from the first gear's axle to the second's
-        rb = dist / (1.0 + abs(gr.ratio))  # the second gear's pitch radius
+        # the second gear's pitch radius: the axles are r_a + r_b apart in an external
+        # mesh (ratio -r_a / r_b), |r_b - r_a| in an internal one (ratio r_a / r_b > 0)
+        rb = dist / abs(1.0 - gr.ratio)
         tb = tau[gr.second]
-        # tangential: tb / rb, its moment tb about b's axle; radial: pushing them apart
-        fx = tb / rb * uy + abs(tb) / rb * tan_a * ux
-        fy = -tb / rb * ux + abs(tb) / rb * tan_a * uy
+        # the pitch point P: P - b = -rb u (between the axles; beyond the pinion where b
+        # is the ring), +rb u where a is the ring and b the pinion inside it
+        d = -1.0 if gr.ratio > 1.0 else 1.0
+        # the radial part pushes the gears apart in an external mesh; in an internal one
+        # it pushes the pinion towards its axle and the ring away from its own
+        e = 1.0 if gr.ratio < 0.0 else -1.0
+        # tangential: moment tb about b's axle; radial: tan(pressure angle) of it
+        fx = d * tb / rb * uy + e * abs(tb) / rb * tan_a * ux
+        fy = -d * tb / rb * ux + e * abs(tb) / rb * tan_a * uy
         return (fx, fy), [(kb, fx, fy, 0.0), (ka, -fx, -fy, 0.0)]
     rack, pinion = (gr.second, gr.first) if jb.type == "prismatic" else (gr.first, gr.second)
     kr, kp = model.jidx[rack], model.jidx[pinion]

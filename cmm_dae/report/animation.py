@@ -148,8 +148,8 @@ class _Scene:
         if not any(types.values()):
             a, b = centre(first), centre(second)
             dist = np.hypot(*(b - a).T)[:, None, None]
-            rb = dist / (1.0 + abs(ratio))
-            return [a[:, None, :] + (dist - rb) * ring, b[:, None, :] + rb * ring]
+            rb = dist / abs(1.0 - ratio)  # external: r_a + r_b apart; internal: |r_b - r_a|
+            return [a[:, None, :] + abs(ratio) * rb * ring, b[:, None, :] + rb * ring]
         pinion = first if types[second] else second
         radius = abs(ratio) if types[second] else 1.0 / abs(ratio)
         return [centre(pinion)[:, None, :] + radius * ring]
