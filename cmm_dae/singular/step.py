@@ -11,8 +11,9 @@ Both integrators stop just before such a position (IDA fails to converge; the fi
 algorithm's Newton solve fails) and hand over their last good state. :func:`step_over`
 then
 
-1. locates the singular instant along the motion (the minimum of the smallest-to-largest
-   singular value ratio of the active constraint rows, the ratio falling linearly to it);
+1. locates the singular instant along the motion (:mod:`.approach`: the minimum of the
+   smallest-to-largest singular value ratio of the active constraint rows, the ratio
+   falling linearly to it);
 2. crosses it with steps of the two-stage Gauss-Legendre method (order 4) on the
    accelerations of the KKT system. Gauss nodes lie inside each step, never at its ends,
    and the singular instant is a step boundary, so the accelerations are never asked for
@@ -33,36 +34,25 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
-from ..core.errors import SolverError, Status
-from ..equations import rank
-from ..equations.kinematics import dependent_rows, rank_drop, row_names
+from ..equations.kinematics import dependent_rows, rank_drop
 from ..equations.model import Model
+from .approach import (  # noqa: F401 (the crossing's thresholds, importable from here)
+    END_RATIO,
+    FINE_NODE_RATIO,
+    NODE_RATIO,
+    PAST_RATIO,
+    Plan,
+    Start,
+    leaves_singular,
+    plan_ahead,
+    plan_behind,
+    ratio,
+)
 from .branches import choose_branch, other_branches
-from .gauss import GL_C, accurate_step, gl2_step, project
+from .gauss import accurate_step, gl2_step, project
 from .instant import singular_instant
 
-#: Gauss steps from the last good state to the singular instant.
-SUBSTEPS = 6
-#: Smallest singular-value ratio wanted at a Gauss node (fewer steps where it would be less).
-NODE_RATIO = 5e-5
-#: ... where a crossing with :data:`NODE_RATIO` failed from every start: on long chains the
-#: ratio falls so slowly (A02 with 48 loops: 0.045 / s, 0.01 at its best) that keeping the
-#: nodes above NODE_RATIO took one Gauss step of 0.1 s over the instant (velocities off by
-#: 1e-4), and every earlier start lay 0.2-0.5 s back. Nodes nearer the instant carry more
-#: of the round-off the near-singular solve amplifies (A02 with 32 loops at rtol 1e-8: the
-#: crank tip 1.6e-6 m off instead of 2.6e-7), hence only as the last resort.
-FINE_NODE_RATIO = 5e-6
-#: ... and, after a failure just past the singular instant, at least this ratio, where
-#: the integrators restart reliably.
-END_RATIO = 0.03
-#: Below this singular-value ratio a failure just past a singular instant is crossed too.
-PAST_RATIO = 0.1
-#: A failure moving away from a singular position the segment started after is only a way
-#: out if the ratio back where it extrapolates to zero is below this share of the ratio at
-#: the failure.
-LEAVING_RATIO = 0.25
 #: The crossing ends where the singular-value ratio is this many times the one at its start.
 AFTER = 12.0
 #: Relative singular value counted as zero by the projections at the singular instant.
@@ -132,62 +122,6 @@ class Crossing:
         return project(model, p, q0, v0, t)[:2]
 
 
-def _ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
-    return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
-
-
-def _ratio_rate(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                a0: np.ndarray, r0: float) -> float:
-    """Rate of the singular-value ratio (1/s) from ``r0`` at (t, q) along the second-order
-    path ahead, over a probe in which the fastest coordinate moves by 1e-6."""
-    probe = 1e-6 / max(float(np.max(np.abs(v), initial=0.0)), 1e-300)
-    return (_ratio(model, q + v * probe + 0.5 * a0 * probe * probe, t + probe, p) - r0) / probe
-
-
-def _collapsed_behind(model: Model, p: np.ndarray, t: float, q_back: np.ndarray,
-                      tau_back: float, r0: float) -> bool:
-    """Whether the ratio at ``q_back``, where it extrapolates to zero ``tau_back`` (s)
-    before t, has collapsed below :data:`LEAVING_RATIO` times ``r0``: a singular position
-    behind, not a ratio that is only low (as on long chains)."""
-    return _ratio(model, q_back, t - tau_back, p) < LEAVING_RATIO * r0
-
-
-def leaves_singular(model: Model, p: np.ndarray, t: float, q: np.ndarray,
-                    v: np.ndarray) -> bool:
-    """Whether the motion at (t, q, v) moves away from a singular position just behind it
-    (the singular-value ratio rising and, where it extrapolates to zero on the
-    second-order path back, collapsed): where IDA's failure is the crossing's to take."""
-    r0 = _ratio(model, q, t, p)
-    vnorm = float(np.max(np.abs(v), initial=0.0))
-    if not (0.0 < r0 < PAST_RATIO and vnorm > 0.0):
-        return False
-    a0 = model.kkt(q, v, t, p)[0]
-    rate = _ratio_rate(model, p, t, q, v, a0, r0)
-    if not rate > 0.0:
-        return False
-    tau = r0 / rate
-    return _collapsed_behind(model, p, t, q - v * tau + 0.5 * a0 * tau * tau, tau, r0)
-
-
-def _instant_ahead(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                   a0: np.ndarray, tau: float, nsub: int) -> float:
-    """Time from t to the singular instant along the Gauss steps themselves, s (``tau``
-    from the second-order path ahead is good to its error, too rough to end a step at the
-    instant where the crossing starts far from it): ``nsub`` steps of ``tau / nsub`` and
-    two beyond bracket it; their signed smallest singular value's root."""
-    h = tau / nsub
-    qq, vv, tt, guess = q, v, t, a0
-    ends = [(t, q, v)]
-    try:
-        for _ in range(nsub + 2):
-            qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
-            tt += h
-            ends.append((tt, qq, vv))
-    except np.linalg.LinAlgError:
-        return tau
-    return singular_instant(model, p, ends, t + tau) - t
-
-
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
               t_end: float, rule: tuple[str, int] | None = None, *, rtol: float = 1e-8,
               atol: float = 1e-10, t_min: float = -math.inf,
@@ -231,165 +165,121 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         With status ``dead point`` when no singular position lies ahead or the motion cannot
         continue through it.
     """
-    labels, r0 = dependent_rows(model, q, t, p, tol=1.0)
-    a0 = model.kkt(q, v, t, p)[0]
-    vnorm = float(np.max(np.abs(v), initial=0.0))
-
-    def path(tau: float) -> np.ndarray:  # the motion ahead, to second order
-        return q + v * tau + 0.5 * a0 * tau * tau
-
-    def dead(why: str) -> SolverError:
-        return SolverError(f"dead point at t = {t:.9g} s: the constraints of "
-                           f"{row_names(labels) or 'the mechanism'} become dependent "
-                           f"(singular-value ratio {r0:.1e}) and {why}",
-                           status=Status.DEAD_POINT)
-
-    if vnorm == 0.0:
-        raise dead("the mechanism is at rest there")
-    # the ratio falls about linearly to the singular instant: its rate gives the scale
-    rate = _ratio_rate(model, p, t, q, v, a0, r0)
-    past = rate >= 0.0
-    leaving = False
-    if past and not r0 < PAST_RATIO:
-        raise dead("the motion does not approach a singular position: it cannot go on")
+    st = Start.at(model, p, t, q, v, rule)
+    if st.vnorm == 0.0:
+        raise st.dead("the mechanism is at rest there")
+    past = st.rate >= 0.0
+    if past and not st.r0 < PAST_RATIO:
+        raise st.dead("the motion does not approach a singular position: it cannot go on")
     if past and rule is not None:
-        raise dead("the integrator had stepped across the instant before it failed, so "
-                   "the branch rule cannot be applied there; a tighter rtol stops it "
-                   "before the instant")
-    if past:
-        # the integrator stepped across the singular instant itself and failed just
-        # beyond it: the instant lies behind, where the ratio extrapolates to zero; only
-        # the way out is left to cross
-        tau_back = r0 / max(rate, 1e-300)
-        tau, r_min, t_s = 0.0, r0, t - min(tau_back, t)
-        # an instant behind the segment's start (or the run's) was not stepped across
-        # in it: the motion only leaves a near-singular position (a run started next to
-        # one, or IDA failing again on the way out of one crossed already), if there is
-        # one back there: the ratio where it extrapolates to zero must have collapsed (a
-        # ratio that is only low, as on long chains, is no singular position)
-        leaving = t - tau_back < max(t_min, 0.0) and _collapsed_behind(
-            model, p, t, path(-tau_back), tau_back, r0)
-        nsub = 0
-        h = max(tau_back, 1e-9 * max(1.0, abs(t))) / 2.0
-        h_ok = h = min(h, accurate_step(model, p, t, q, v, h, a0, rtol, atol))
-    else:
-        tau_lin = r0 / -rate
-        opt = minimize_scalar(lambda s: _ratio(model, path(s), t + s, p),
-                              bounds=(0.0, 3.0 * tau_lin), method="bounded",
-                              options={"xatol": 1e-6 * tau_lin})
-        tau = float(opt.x)
-        r_min = float(opt.fun)
-        if not 0.0 < tau < 2.9 * tau_lin:
-            raise dead("no singular instant was found ahead")
-        t_s = t + tau
-        # Gauss steps of tau / nsub: the singular instant is a step end; then on until
-        # the constraints are as well conditioned as where the integrator stopped, AFTER
-        # times over (it stopped because they were not well conditioned enough for it).
-        # More steps where the integrator stopped far from the singular instant
-        # (accuracy); few where it came close, so that no Gauss node falls where the
-        # accelerations are dominated by the round-off the near-singular solve amplifies
-        # (the node nearest it lies 0.211 h away, where the ratio is about
-        # r0 * 0.211 / nsub).
-        h_ok = accurate_step(model, p, t, q, v, tau / SUBSTEPS, a0, rtol, atol)
-        nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / node_ratio))
-        if rule is not None or nsub >= 2:
-            # A step must end at the instant itself: a branch rule is applied there, and
-            # a Gauss node must not fall next to it. tau from the second-order path was
-            # 3e-4 s off on A02 with 40 loops at rtol 1e-11 (0.09 s ahead), a node then
-            # came within round-off range of the instant and the velocities jumped by
-            # 1.8e-5 (a dead point); along the Gauss steps themselves 8e-9.
-            nsub = max(nsub, 1)
-            tau = _instant_ahead(model, p, t, q, v, a0, tau, nsub)
-        if nsub >= 2 or rule is not None:
-            h = tau / nsub
-        else:
-            # The integrator came so close that even a step ending at the singular
-            # instant would put a node in the round-off zone: one step over it instead,
-            # long enough for both nodes to lie beyond it at a safe ratio (the
-            # collocation polynomial spans the instant; the accelerations are not
-            # needed there).
-            nsub = 0
-            h = (tau + 20.0 * node_ratio / -rate) / GL_C[0]
-            h_ok = min(h_ok, h)
+        raise st.dead("the integrator had stepped across the instant before it failed, so "
+                      "the branch rule cannot be applied there; a tighter rtol stops it "
+                      "before the instant")
+    plan = (plan_behind(st, rtol, atol, t_min) if past
+            else plan_ahead(st, rtol, atol, node_ratio))
+    try:
+        tt, qq, vv, taken, ends, switched = _march(st, plan, t_end, rtol, atol)
+    except np.linalg.LinAlgError as e:
+        raise st.dead(f"the motion cannot be continued through it ({e})") from None
+    return _arrive(st, plan, tt, qq, vv, taken, ends, switched, t_end, t_min)
+
+
+def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tuple:
+    """The Gauss steps to the instant (a branch rule applied there) and out until the
+    ratio reaches the target or turns down: (t, q, v) at the end, the steps taken, their
+    ends (the start first) and whether the branch was switched."""
+    model, p, r0, rate, nsub = st.model, st.p, st.r0, st.rate, plan.nsub
+    h, tau = plan.h, plan.tau
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
     # restart reliably) would take more than 100 of them: then growing ones.
-    target = max(AFTER * r0, END_RATIO, 4.0 * r0) if past else max(AFTER * r0, 0.2 * END_RATIO)
-    if rule is not None:
+    target = (max(AFTER * r0, END_RATIO, 4.0 * r0) if plan.past
+              else max(AFTER * r0, 0.2 * END_RATIO))
+    if st.rule is not None:
         # a crossing the branch rule asked for may start where IDA was still doing well
         # (the samples before a position it stepped over): out to twice that ratio
         target = min(target, max(2.0 * r0, AFTER * END_RATIO))
     way_out = (target - r0) / max(abs(rate), 1e-300) + tau
     grow = 1.0 if way_out <= 100 * h else 1.1
     # never longer than the accurate step (but at most MAX_STEPS_OUT steps out)
-    h_max = max(h_ok, way_out / MAX_STEPS_OUT)
-    qq, vv, tt, guess = q, v, t, a0
+    h_max = max(plan.h_ok, way_out / MAX_STEPS_OUT)
+    qq, vv, tt, guess = st.q, st.v, st.t, st.a0
     switched = False
     r_prev = 0.0
     taken: list[float] = []
-    ends = [(t, q, v)]
-    try:
-        for k in range(nsub + MAX_STEPS_OUT + 200):
-            if tt + h > t_end:
-                h = t_end - tt
-            qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
-            taken.append(h)
-            tt += h
-            ends.append((tt, qq, vv))
-            if k == nsub - 1 and rule is not None:  # at the singular instant: which way
-                qs, vs, _ = project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
-                others = other_branches(model, p, tt, qs, vs)
-                vnew, switched = choose_branch(model, vs, others, qs, rule, tt)
-                if switched:  # else the motion goes on undisturbed
-                    qq, vv = qs, vnew
-                    ends.append((tt, qq, vv))  # the same instant again: the new branch
-            if k >= nsub - 1:
-                r_now = _ratio(model, qq, tt, p)
-                # out at the target, or where the conditioning is best (it turns down
-                # before the target when the integrator gave up far from the position)
-                if tt >= t_end or r_now >= target or (k > nsub and r_now < r_prev):
-                    break
-                r_prev = r_now
-                if (k - nsub) % RECHECK == RECHECK - 1:
-                    # the step the local error allows here, as the conditioning recovers:
-                    # started a hair past the instant (the integrator had stepped across
-                    # it), A02 at rtol 1e-8 kept 1e-5 s steps for 1941 steps
-                    h_max = max(h_max, min(accurate_step(model, p, tt, qq, vv, h, guess,
-                                                          rtol, atol), 0.25 * way_out))
-                h = min(h * grow, max(h, h_max))
-    except np.linalg.LinAlgError as e:
-        raise dead(f"the motion cannot be continued through it ({e})") from None
+    ends = [(st.t, st.q, st.v)]
+    for k in range(nsub + MAX_STEPS_OUT + 200):
+        if tt + h > t_end:
+            h = t_end - tt
+        qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
+        taken.append(h)
+        tt += h
+        ends.append((tt, qq, vv))
+        if k == nsub - 1 and st.rule is not None:  # at the singular instant: which way
+            qs, vs, _ = project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
+            others = other_branches(model, p, tt, qs, vs)
+            vnew, switched = choose_branch(model, vs, others, qs, st.rule, tt)
+            if switched:  # else the motion goes on undisturbed
+                qq, vv = qs, vnew
+                ends.append((tt, qq, vv))  # the same instant again: the new branch
+        if k >= nsub - 1:
+            r_now = ratio(model, qq, tt, p)
+            # out at the target, or where the conditioning is best (it turns down before
+            # the target when the integrator gave up far from the position)
+            if tt >= t_end or r_now >= target or (k > nsub and r_now < r_prev):
+                break
+            r_prev = r_now
+            if (k - nsub) % RECHECK == RECHECK - 1:
+                # the step the local error allows here, as the conditioning recovers:
+                # started a hair past the instant (the integrator had stepped across
+                # it), A02 at rtol 1e-8 kept 1e-5 s steps for 1941 steps
+                h_max = max(h_max, min(accurate_step(model, p, tt, qq, vv, h, guess,
+                                                      rtol, atol), 0.25 * way_out))
+            h = min(h * grow, max(h, h_max))
+    return tt, qq, vv, taken, ends, switched
+
+
+def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
+            taken: list[float], ends: list, switched: bool, t_end: float,
+            t_min: float) -> Crossing:
+    """The state after the crossing projected and checked (the motion went on: the
+    constraints close, the velocities did not jump, the ratio recovered), the rank drop
+    and the instant located along the Gauss steps: the :class:`Crossing`."""
+    model, p, t, r0, nsub = st.model, st.p, st.t, st.r0, plan.nsub
     q1, v1, dq = project(model, p, qq, vv, tt)
     act = model.active_rows(p)
     closes = float(np.max(np.abs(model.constraints(q1, tt, p).phi[act]), initial=0.0))
-    jump = float(np.max(np.abs(v1 - vv), initial=0.0)) / vnorm
-    r1 = _ratio(model, q1, tt, p)
+    jump = float(np.max(np.abs(v1 - vv), initial=0.0)) / st.vnorm
+    r1 = ratio(model, q1, tt, p)
     scale = max(float(np.max(np.abs(q1), initial=0.0)), 1.0)
     if closes > 1e-10 * scale:
-        raise dead(f"beyond it the constraints cannot be satisfied (residual {closes:.1e}): "
-                   "the mechanism cannot follow its drivers through this position")
+        raise st.dead(f"beyond it the constraints cannot be satisfied (residual "
+                      f"{closes:.1e}): the mechanism cannot follow its drivers through "
+                      "this position")
     if jump > 1e-5 or dq > 1e-6 * scale or (tt < t_end and r1 < r0):
-        raise dead(f"the motion cannot continue through it (velocity change "
-                   f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
+        raise st.dead(f"the motion cannot continue through it (velocity change "
+                      f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
+    t_s, labels = plan.t_s, st.labels
     # counted where the Gauss steps reach the instant (the second-order path ahead is
     # off there by its error, enough to miss most of a large rank drop)
-    drop = rank_drop(model, ends[nsub][1] if nsub >= 1 else path(tau), t_s, p, r0)
+    drop = rank_drop(model, ends[nsub][1] if nsub >= 1 else st.path(plan.tau), t_s, p, r0)
     if drop > 1:  # the rows of every collapsing singular value, not of the last alone
-        labels = dependent_rows(model, q, t, p, tol=1.0, drop=drop)[0]
-    if not past:  # the instant along the Gauss steps, not the second-order path ahead
+        labels = dependent_rows(model, st.q, t, p, tol=1.0, drop=drop)[0]
+    if not plan.past:  # the instant along the Gauss steps, not the second-order path
         t_s = singular_instant(model, p, ends, t_s)
-    elif t_s > 0.0 and not leaving:  # behind: one Gauss step back twice as far brackets it
+    elif t_s > 0.0 and not plan.leaving:  # behind: a Gauss step back twice as far
         back = max(t - 2.0 * (t - t_s), 0.0)
         try:
-            qb, vb, _ = gl2_step(model, p, t, q, v, back - t, a0)
+            qb, vb, _ = gl2_step(model, p, t, st.q, st.v, back - t, st.a0)
             t_s = singular_instant(model, p, [(back, qb, vb)] + ends, t_s)
         except np.linalg.LinAlgError:
             pass  # the extrapolated instant stands
-    if past and not leaving and not max(t_min, 0.0) <= t_s <= t:
+    if plan.past and not plan.leaving and not max(t_min, 0.0) <= t_s <= t:
         # No instant behind inside the segment: the integrator did not step across one
         # (after A02's third crossing with 40 loops at rtol 1e-11 IDA failed 4e-8 s into
         # its restart, where the ratio peaks; the instant "behind" came out at 14.4 s).
-        raise dead("the integrator failed without having stepped across a singular "
-                   "position: it cannot go on")
-    return Crossing(t - tau_back if past and leaving else t_s, tt, q1, v1, labels, drop,
-                    r_min, jump, switched, tuple(taken), nsub, tuple(ends),
-                    instant=not (past and leaving))
+        raise st.dead("the integrator failed without having stepped across a singular "
+                      "position: it cannot go on")
+    way_out_only = plan.past and plan.leaving
+    return Crossing(t - plan.tau_back if way_out_only else t_s, tt, q1, v1, labels, drop,
+                    plan.r_min, jump, switched, tuple(taken), nsub, tuple(ends),
+                    instant=not way_out_only)
