@@ -106,6 +106,19 @@ def test_no_module_over_400_lines():
     assert not over, sorted(over)
 
 
+def test_no_function_over_100_lines():
+    """Functions a reader can hold: none of the package's over 100 lines (docstring and
+    nested functions included)."""
+    import ast
+
+    over = [f"{f.relative_to(PKG)}:{node.lineno} {node.name} "
+            f"({node.end_lineno - node.lineno + 1} lines)"
+            for f, _ in _modules() for node in ast.walk(ast.parse(f.read_text()))
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+            and node.end_lineno - node.lineno + 1 > 100]
+    assert not over, over
+
+
 def test_api_reference_lists_exactly_what_the_package_exports():
     import re
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+from .group_names import group_class, group_name
 from .mechanism import GROUND, Mechanism
 
 #: Most candidate body sets the group search examines for one mechanism. The search walks
@@ -117,66 +118,10 @@ def force_constraint_joints(mech: Mechanism) -> dict[str, str]:
     return out
 
 
-def _letter(mech: Mechanism, j: str) -> str:
-    return {"revolute": "R", "prismatic": "P"}.get(mech.joints[j].type, "C")
-
-
 def _cost(mech: Mechanism, joints) -> int:
     """Degrees of freedom the joints take: 2 a lower pair, 1 a contact (a higher pair,
     counted as touching)."""
     return sum(1 if mech.joints[j].type == "contact" else 2 for j in joints)
-
-
-def _other(mech: Mechanism, joint: str, body: str) -> str:
-    j = mech.joints[joint]
-    return j.second_body if j.first_body == body else j.first_body
-
-
-def _touches(mech: Mechanism, joint: str, body: str) -> bool:
-    return body in (mech.joints[joint].first_body, mech.joints[joint].second_body)
-
-
-def _walk(mech: Mechanism, adj: dict[str, list[str]], degree: dict[str, int], body: str,
-          seq: list[str]) -> tuple[list[str], str]:
-    """Follow internal joints from ``body`` (``seq`` holds the joints taken so far) until a
-    free end or a body with more than two internal joints; returns (joints, last body)."""
-    seen = set(seq)
-    while True:
-        nxt = [k for k in adj[body] if k not in seen]
-        if not nxt or degree[body] > 2:
-            return seq, body
-        seq.append(nxt[0])
-        seen.add(nxt[0])
-        body = _other(mech, nxt[0], body)
-
-
-def _group_name(mech: Mechanism, bodies: set[str], internal: list[str], external: list[str]
-                ) -> str:
-    """Letters along the group: a chain from one external joint to the other, or branches
-    (external then internal joint) around a ternary body."""
-    adj: dict[str, list[str]] = {b: [] for b in bodies}
-    for j in internal:
-        adj[mech.joints[j].first_body].append(j)
-        adj[mech.joints[j].second_body].append(j)
-    degree = {b: len(adj[b]) for b in bodies}
-    if max(degree.values(), default=0) <= 2:  # chain
-        if not external:
-            return "".join(_letter(mech, j) for j in internal)
-        start = external[0]
-        body = next(x for x in bodies if _touches(mech, start, x))
-        seq, _ = _walk(mech, adj, degree, body, [start])
-        seq += [j for j in external if j not in seq][:1]
-        return "".join(_letter(mech, j) for j in seq)
-    hub = max(bodies, key=lambda x: degree[x])
-    branches = []
-    for j in adj[hub]:  # each branch: its external joint(s), then inward to the hub
-        seq, end = _walk(mech, adj, degree, _other(mech, j, hub), [j])
-        ext = [e for e in external if _touches(mech, e, end)]
-        branches.append("".join(_letter(mech, e) for e in ext + seq[::-1]))
-    hub_ext = [e for e in external if _touches(mech, e, hub)]
-    if hub_ext:
-        branches.append("".join(_letter(mech, e) for e in hub_ext))
-    return "-".join(branches)
 
 
 def _merge(mech: Mechanism, locked: set[str]) -> dict[str, str]:
@@ -196,16 +141,6 @@ def _merge(mech: Mechanism, locked: set[str]) -> dict[str, str]:
                 a, b = b, a
             rep[b] = a
     return {b: find(b) for b in rep}
-
-
-def _class(n_bodies: int, degrees: list[int]) -> int:
-    if n_bodies <= 1:
-        return 1
-    if n_bodies == 2:
-        return 2
-    if n_bodies == 4 and max(degrees, default=0) >= 3:
-        return 3
-    return n_bodies
 
 
 def _connected_sets(units: list[str], neighbours: dict[str, set[str]], budget: int
@@ -240,87 +175,112 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
     Structure
         Printable (``str``) report.
     """
-    joints = mech.joints
-    metamorphic = set(mech.limited_joints)
-    mobility = 3 * len(mech.bodies) - _cost(mech, joints) - len(mech.gears)
-    known = {GROUND}
-    active = []
-    changed = True
-    while changed:  # bodies driven from a known body are active parts
-        changed = False
-        for d in mech.drivers:
-            j = joints[d]
-            for a, b in ((j.first_body, j.second_body), (j.second_body, j.first_body)):
-                if a in known and b not in known and b != GROUND:
-                    known.add(b)
-                    active.append(b)
-                    changed = True
-    # Joints held on a stop by a preloaded spring weld their two bodies in the natural
-    # state of the mechanism (the paper: "5 and 6 combined into one component").
-    welded = force_constraint_joints(mech)
-    rep = _merge(mech, set(welded))
-    units: dict[str, set[str]] = {}
-    for b in mech.bodies:
-        if rep[b] != GROUND and b not in known:
-            units.setdefault(rep[b], set()).add(b)
-    remaining = list(units)
+    mobility = 3 * len(mech.bodies) - _cost(mech, mech.joints) - len(mech.gears)
+    search = _Search(mech, budget)
     groups: list[Group] = []
-    at: dict[str, list[str]] = {}  # body -> its joints (drivers' joints left out)
-    for n, j in joints.items():
-        if n not in mech.drivers:
-            for b in {j.first_body, j.second_body}:
-                at.setdefault(b, []).append(n)
-    neighbours: dict[str, set[str]] = {u: set() for u in units}
-    for j in joints.values():
-        a, b = rep.get(j.first_body), rep.get(j.second_body)
-        if a in neighbours and b in neighbours and a != b:
-            neighbours[a].add(b)
-            neighbours[b].add(a)
-    left_budget = [budget]
-    jorder = {n: i for i, n in enumerate(joints)}
+    while search.remaining:
+        g = search.find(0) or search.find(1) or search.find(1, single=True)
+        if g is None:
+            break
+        groups.append(g)
+        search.known.update(g.bodies)
+        search.remaining = [u for u in search.remaining
+                            if not search.units[u] <= search.known]
+    order = list(mech.bodies).index
+    left = [b for u in search.remaining for b in sorted(search.units[u], key=order)]
+    return Structure(mech.name, mobility, tuple(search.active), tuple(groups), tuple(left),
+                     tuple(search.welded), budget - max(search.budget, 0))
 
-    def joints_of(S: set[str]) -> tuple[list[str], list[str]]:
+
+class _Search:
+    """The state of one structure analysis: the known bodies (the frame, then the active
+    parts, then each group found), the units left (bodies welded by preloaded joints count
+    as one) and what is left of the search budget."""
+
+    def __init__(self, mech: Mechanism, budget: int):
+        self.mech, self.budget = mech, budget
+        joints = mech.joints
+        self.metamorphic = set(mech.limited_joints)
+        self.known = {GROUND}
+        self.active: list[str] = []
+        changed = True
+        while changed:  # bodies driven from a known body are active parts
+            changed = False
+            for d in mech.drivers:
+                j = joints[d]
+                for a, b in ((j.first_body, j.second_body), (j.second_body, j.first_body)):
+                    if a in self.known and b not in self.known and b != GROUND:
+                        self.known.add(b)
+                        self.active.append(b)
+                        changed = True
+        # Joints held on a stop by a preloaded spring weld their two bodies in the natural
+        # state of the mechanism (the paper: "5 and 6 combined into one component").
+        self.welded = force_constraint_joints(mech)
+        self.rep = _merge(mech, set(self.welded))
+        self.units: dict[str, set[str]] = {}
+        for b in mech.bodies:
+            if self.rep[b] != GROUND and b not in self.known:
+                self.units.setdefault(self.rep[b], set()).add(b)
+        self.remaining = list(self.units)
+        self.at: dict[str, list[str]] = {}  # body -> its joints (drivers' left out)
+        for n, j in joints.items():
+            if n not in mech.drivers:
+                for b in {j.first_body, j.second_body}:
+                    self.at.setdefault(b, []).append(n)
+        self.neighbours: dict[str, set[str]] = {u: set() for u in self.units}
+        for j in joints.values():
+            a, b = self.rep.get(j.first_body), self.rep.get(j.second_body)
+            if a in self.neighbours and b in self.neighbours and a != b:
+                self.neighbours[a].add(b)
+                self.neighbours[b].add(a)
+        self.jorder = {n: i for i, n in enumerate(joints)}
+
+    def joints_of(self, S: set[str]) -> tuple[list[str], list[str]]:
+        """The joints inside the body set S and those joining it to known bodies."""
         internal, external = [], []
-        for n in sorted({n for b in S for n in at.get(b, [])}, key=jorder.__getitem__):
-            j = joints[n]
+        for n in sorted({n for b in S for n in self.at.get(b, [])},
+                        key=self.jorder.__getitem__):
+            j = self.mech.joints[n]
             a, b = j.first_body, j.second_body
             if a in S and b in S:
                 internal.append(n)
-            elif (a in S and b in known) or (b in S and a in known):
+            elif (a in S and b in self.known) or (b in S and a in self.known):
                 external.append(n)
         return internal, external
 
-    def connected(S: set[str], internal: list[str]) -> bool:
+    def connected(self, S: set[str], internal: list[str]) -> bool:
+        """Whether the internal joints connect all of S."""
         start = next(iter(S))
         seen, stack = {start}, [start]
         while stack:
             x = stack.pop()
             for n in internal:
-                j = joints[n]
+                j = self.mech.joints[n]
                 for a, b in ((j.first_body, j.second_body), (j.second_body, j.first_body)):
                     if a == x and b not in seen:
                         seen.add(b)
                         stack.append(b)
         return seen == S
 
-    def try_find(target: int, single: bool = False) -> Group | None:
-        """Smallest group of ``remaining`` units with ``target`` DOF; an augmented group
+    def find(self, target: int, single: bool = False) -> Group | None:
+        """Smallest group of the remaining units with ``target`` DOF; an augmented group
         must leave at least two bodies once locked (else it is a link welded to a known
         body), unless ``single`` allows that as a last resort."""
-        for combo in _connected_sets(remaining, neighbours, left_budget[0]):
-            left_budget[0] -= 1
-            if left_budget[0] < 0:
+        mech, joints, welded, rep = self.mech, self.mech.joints, self.welded, self.rep
+        for combo in _connected_sets(self.remaining, self.neighbours, self.budget):
+            self.budget -= 1
+            if self.budget < 0:
                 return None
-            S = set().union(*(units[u] for u in combo))
-            internal, external = joints_of(S)
-            if not connected(S, internal):
+            S = set().union(*(self.units[u] for u in combo))
+            internal, external = self.joints_of(S)
+            if not self.connected(S, internal):
                 continue
             live = [j for j in internal if j not in welded]
             f = 3 * len(combo) - _cost(mech, live + list(external))
-            meta = tuple(j for j in internal + external if j in metamorphic)
+            meta = tuple(j for j in internal + external if j in self.metamorphic)
             if f != target or (target == 1 and not [m for m in meta if m not in welded]):
                 continue
-            name = _group_name(mech, S, internal, external)
+            name = group_name(mech, S, internal, external)
             deg = [sum(rep[b] == u for j in live for b in (joints[j].first_body,
                                                            joints[j].second_body))
                    for u in combo]
@@ -330,24 +290,13 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
                 n_locked = len({rep2[b] for b in S} - {GROUND})
                 if n_locked < 2 and not single:
                     continue
-                cls = _class(n_locked, deg)
+                cls = group_class(n_locked, deg)
             else:
-                cls = _class(len(combo), deg)
+                cls = group_class(len(combo), deg)
             augmented = target == 1 or any(m in welded for m in meta)
             return Group(name, cls, tuple(sorted(S, key=list(mech.bodies).index)),
                          tuple(internal), tuple(external), augmented, meta)
         return None
-
-    while remaining:
-        g = try_find(0) or try_find(1) or try_find(1, single=True)
-        if g is None:
-            break
-        groups.append(g)
-        known.update(g.bodies)
-        remaining = [u for u in remaining if not units[u] <= known]
-    left = [b for u in remaining for b in sorted(units[u], key=list(mech.bodies).index)]
-    return Structure(mech.name, mobility, tuple(active), tuple(groups), tuple(left),
-                     tuple(welded), budget - max(left_budget[0], 0))
 
 
 def configuration_label(st: Structure | None, locked: dict[str, str],

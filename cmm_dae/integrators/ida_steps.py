@@ -4,6 +4,7 @@ a failure."""
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import io
@@ -116,6 +117,8 @@ def _redirect_fd1() -> int | None:
         _FFLUSH(None)
         if not _CAPTURE:
             _CAPTURE.append(tempfile.TemporaryFile())  # noqa: SIM115 (kept for the process)
+            # closed at exit (else Python warns of an unclosed file as it shuts down)
+            atexit.register(_CAPTURE[0].close)
         saved = os.dup(1)
         os.dup2(_CAPTURE[0].fileno(), 1)
         return saved

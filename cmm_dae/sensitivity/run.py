@@ -237,58 +237,13 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     paths = check_params(mech, params)
     if atol is None and isinstance(rtol, float | int):
         atol = 1e-2 * rtol  # as for a run
-    solved: tuple[str, ...] = ()
-    if mech.initial.equilibrium:  # the solved values move with the parameters: carried
-        mech, eq_values = solve_equilibrium(mech)  # as parameters, eliminated at the end
-        solved = tuple(eq_values)
-        clash = [x for x in paths if x in solved]
-        if clash:
-            raise ModelError([Problem("sensitivities", x, "is solved by the [initial] "
-                                      "equilibrium, not a free parameter") for x in clash],
-                             mech.source)
-    model = Model(mech, theta=paths + solved, pinned_angles=False)
-    drop = redundant_base_rows(model) if model.m else ()
-    if drop:  # as the run leaves them out (the pass must follow the same equations)
-        model = Model(mech, theta=paths + solved, drop=drop, pinned_angles=False)
-    why = _unsupported(mech, model)
-    if why is not None:
-        raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),
-                         mech.source)
-    eq = Equations(model)
-    unused = [x for i, x in enumerate(paths + solved) if not x.startswith(("initial.", "joints."))
-              and not ca.depends_on(model.sym["F"], model.theta[i])]
-    if unused:
-        raise ModelError([Problem("sensitivities", x, "has no effect on this mechanism's "
-                                  "equations") for x in unused], mech.source)
+    mech, model, eq, solved = _sensitivity_model(mech, paths)
     trace: list = []
     res = simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,
                    model=model, _trace=trace, **run_options)
-    switch = next((seg.crossing for seg in trace[1:]
-                   if seg.crossing is not None and seg.crossing.switched), None)
-    if switch is not None:
-        raise CmmError(f"sensitivities through a branch switch at a singular position "
-                       f"(t = {switch.t_singular:.9g} s) are not defined: the branch taken "
-                       "there is a discrete choice")
-    q0, v0, start_events = trace[0]
-    impact = next((e for e in start_events if e.kind not in ("lock", "stick", "slip")), None)
-    if impact is not None:
-        raise CmmError(f"sensitivities of a run that starts with an impact are not available: "
-                       f"joint {impact.joint} starts on its {impact.side} stop moving into it "
-                       f"({impact.kind} at t = 0); start it off the stop or at rest")
+    q0, v0, start_events = _differentiable(trace)
     sp = SensitivityPass(model, eq, res, {"rtol": rtol, "atol": atol}, error_control)
-    sq, sv = sp.start(q0, v0, start_events)
-    sp.sq[0], sp.sv[0] = sq, sv
-    n = 1
-    first = trace[1] if len(trace) > 1 else None
-    if first is not None:
-        sp.dP[0], sp.params[0] = sp.dp_of(first.p), first.p
-    for seg in trace[1:]:
-        q, v, sq, sv = sp.segment(seg, sq, sv)
-        for t_s, k in seg.passages:  # IDA integrated through these inside the segment
-            sp.tau.append(sp.passage_tau(seg.p, t_s, k))
-        q, v, sq, sv, n = sp.events(seg, q, v, sq, sv, seg.n1)
-        if seg.crossing is not None:
-            q, v, sq, sv = sp.crossing(seg, sq, sv, n)
+    _along(sp, trace, q0, v0, start_events)
     ev_t = np.zeros((len(res.events), sp.P))  # the events at t = 0 first: fixed time
     if sp.tau:
         ev_t[len(start_events):len(start_events) + len(sp.tau)] = sp.tau
@@ -350,3 +305,71 @@ def _through_equilibrium(sp: SensitivityPass, res: Result, ev_t: np.ndarray,
     return total(ev_t), {k: total(v) for k, v in data.items()}
 
 
+def _sensitivity_model(mech: Mechanism, paths: list[str]
+                       ) -> tuple[Mechanism, Model, Equations, tuple[str, ...]]:
+    """The model with the parameters ``paths`` symbolic (and the values an [initial]
+    equilibrium solves, carried as parameters and eliminated at the end): the mechanism
+    (equilibrium solved), the model, its sensitivity equations and the solved paths.
+    Raises a ModelError for a mechanism the sensitivities are not defined for or a path
+    without effect."""
+    solved: tuple[str, ...] = ()
+    if mech.initial.equilibrium:  # the solved values move with the parameters: carried
+        mech, eq_values = solve_equilibrium(mech)  # as parameters, eliminated at the end
+        solved = tuple(eq_values)
+        clash = [x for x in paths if x in solved]
+        if clash:
+            raise ModelError([Problem("sensitivities", x, "is solved by the [initial] "
+                                      "equilibrium, not a free parameter") for x in clash],
+                             mech.source)
+    model = Model(mech, theta=paths + solved, pinned_angles=False)
+    drop = redundant_base_rows(model) if model.m else ()
+    if drop:  # as the run leaves them out (the pass must follow the same equations)
+        model = Model(mech, theta=paths + solved, drop=drop, pinned_angles=False)
+    why = _unsupported(mech, model)
+    if why is not None:
+        raise ModelError(Problem("sensitivities", "mechanism", f"not available for {why}"),
+                         mech.source)
+    eq = Equations(model)
+    unused = [x for i, x in enumerate(paths + solved) if not x.startswith(("initial.", "joints."))
+              and not ca.depends_on(model.sym["F"], model.theta[i])]
+    if unused:
+        raise ModelError([Problem("sensitivities", x, "has no effect on this mechanism's "
+                                  "equations") for x in unused], mech.source)
+    return mech, model, eq, solved
+
+
+def _differentiable(trace: list) -> tuple:
+    """The run's start (q0, v0, its events at t = 0), after checking that the run is
+    differentiable: no branch switch at a singular position, no impact at the start."""
+    switch = next((seg.crossing for seg in trace[1:]
+                   if seg.crossing is not None and seg.crossing.switched), None)
+    if switch is not None:
+        raise CmmError(f"sensitivities through a branch switch at a singular position "
+                       f"(t = {switch.t_singular:.9g} s) are not defined: the branch taken "
+                       "there is a discrete choice")
+    q0, v0, start_events = trace[0]
+    impact = next((e for e in start_events if e.kind not in ("lock", "stick", "slip")), None)
+    if impact is not None:
+        raise CmmError(f"sensitivities of a run that starts with an impact are not available: "
+                       f"joint {impact.joint} starts on its {impact.side} stop moving into it "
+                       f"({impact.kind} at t = 0); start it off the stop or at rest")
+    return q0, v0, start_events
+
+
+def _along(sp: SensitivityPass, trace: list, q0: np.ndarray, v0: np.ndarray,
+           start_events: list) -> None:
+    """The sensitivity pass along the run's segments: each segment, the passages IDA
+    integrated through in it, its events and its crossing."""
+    sq, sv = sp.start(q0, v0, start_events)
+    sp.sq[0], sp.sv[0] = sq, sv
+    n = 1
+    first = trace[1] if len(trace) > 1 else None
+    if first is not None:
+        sp.dP[0], sp.params[0] = sp.dp_of(first.p), first.p
+    for seg in trace[1:]:
+        q, v, sq, sv = sp.segment(seg, sq, sv)
+        for t_s, k in seg.passages:  # IDA integrated through these inside the segment
+            sp.tau.append(sp.passage_tau(seg.p, t_s, k))
+        q, v, sq, sv, n = sp.events(seg, q, v, sq, sv, seg.n1)
+        if seg.crossing is not None:
+            q, v, sq, sv = sp.crossing(seg, sq, sv, n)

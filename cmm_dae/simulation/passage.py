@@ -171,45 +171,10 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         return ratios[i]
 
     act = model.active_rows(p)
-    if 0 < act.size <= model.nq:
-        # the samples where the ratio may dip to zero: the segment's ends, and local
-        # minima of log det(J J^T) well below one neighbour. Next to a passage the
-        # smallest singular value falls linearly to zero, so the sample nearer the
-        # instant has at most a third of the farther neighbour's (a drop of 2 ln 3 in
-        # the log determinant, the other singular values unchanged); where the
-        # determinant is flat, round-off makes local minima everywhere.
-        d = _log_gram(model, p, t, q, act)
-        lo_d, hi_d = np.append(d[0], d[:-1]), np.append(d[1:], d[-1])
-        dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
-        candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
-        # an end: where the ratio falls towards it and, on the two samples beside it
-        # extended linearly, reaches zero within an interval of it
-        for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
-            if b < 0 or b >= n:  # two samples: the line through both
-                a, b = end, a
-            slope = (r(b) - r(a)) / (t[b] - t[a])
-            zero = t[a] - r(a) / slope if slope != 0.0 else math.inf
-            reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
-            if r(end) <= r(a) and abs(zero - t[end]) <= reach:
-                candidates.append(end)
-    else:  # no rows, or more than coordinates: every sample, as the ratio says
-        candidates = list(range(n))
     s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
     found: list[Passage] = []
     searched: set[int] = set()
-    dips: set[int] = set()
-    for i in candidates:
-        # down the exact ratio to its own local minimum (next to the determinant's,
-        # where the other singular values change fast)
-        for _ in range(2):
-            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
-            k = min((lo, i, hi), key=r)
-            if r(k) >= r(i):
-                break
-            i = k
-        if r(i) < WATCH_RATIO:
-            dips.add(i)
-    for i in sorted(dips):
+    for i in sorted(_dips(_candidates(model, p, t, q, act, r), n, r)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
@@ -219,24 +184,8 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             if a in searched or t[a + 1] <= t[a] or (skip_last and a == n - 2):
                 continue
             searched.add(a)
-            ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
-
-            def at(x: float, ends: tuple = ends) -> float:  # x: fraction of the interval
-                tx = float(ends[0] + x * (ends[3] - ends[0]))
-                return singular_ratio(model, hermite(*ends, tx)[0], tx, p)
-
-            k = int(np.argmin(_on_grid(model, p, ends, s, act, at)))
-            # the ratio dips in a V to zero: the grid may step over its tip, a bounded
-            # search between the grid's neighbours finds it. On the ratio's square, which
-            # is a parabola there (and smooth where it stays clear of zero), Brent's
-            # parabolic steps converge in 6-11 evaluations, where the V took 20-24
-            lo_s = s[k - 1] if k > 0 else 0.0
-            hi_s = s[k + 1] if k < s.size - 1 else 1.0
-            opt = minimize_scalar(lambda x: at(x) ** 2, bounds=(lo_s, hi_s),
-                                  method="bounded", options={"xatol": 1e-9})
-            r_k = at(float(s[k]))
-            x, r_min = (float(opt.x), math.sqrt(float(opt.fun))) if opt.fun < r_k * r_k \
-                else (float(s[k]), r_k)
+            x, r_min = _interval_minimum(model, p, (t[a], q[a], v[a], t[a + 1], q[a + 1],
+                                                    v[a + 1]), s, act)
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant
@@ -252,6 +201,75 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
+
+
+def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
+                act: np.ndarray, r) -> list[int]:
+    """The samples where the ratio may dip to zero: the segment's ends, and local minima
+    of log det(J J^T) well below one neighbour (every sample where the rows are none or
+    more than the coordinates). ``r(i)``: the exact ratio at sample i."""
+    n = t.size
+    if not 0 < act.size <= model.nq:
+        return list(range(n))
+    # Next to a passage the smallest singular value falls linearly to zero, so the sample
+    # nearer the instant has at most a third of the farther neighbour's (a drop of 2 ln 3
+    # in the log determinant, the other singular values unchanged); where the
+    # determinant is flat, round-off makes local minima everywhere.
+    d = _log_gram(model, p, t, q, act)
+    lo_d, hi_d = np.append(d[0], d[:-1]), np.append(d[1:], d[-1])
+    dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
+    candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
+    # an end: where the ratio falls towards it and, on the two samples beside it extended
+    # linearly, reaches zero within an interval of it
+    for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
+        if b < 0 or b >= n:  # two samples: the line through both
+            a, b = end, a
+        slope = (r(b) - r(a)) / (t[b] - t[a])
+        zero = t[a] - r(a) / slope if slope != 0.0 else math.inf
+        reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
+        if r(end) <= r(a) and abs(zero - t[end]) <= reach:
+            candidates.append(end)
+    return candidates
+
+
+def _dips(candidates: list[int], n: int, r) -> set[int]:
+    """The candidates followed down the exact ratio ``r`` to its own local minimum (next
+    to the determinant's, where the other singular values change fast), those below
+    :data:`WATCH_RATIO`."""
+    dips: set[int] = set()
+    for i in candidates:
+        for _ in range(2):
+            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+            k = min((lo, i, hi), key=r)
+            if r(k) >= r(i):
+                break
+            i = k
+        if r(i) < WATCH_RATIO:
+            dips.add(i)
+    return dips
+
+
+def _interval_minimum(model: Model, p: np.ndarray, ends: tuple, s: np.ndarray,
+                      act: np.ndarray) -> tuple[float, float]:
+    """The smallest singular-value ratio on the samples' interpolant between two samples
+    (``ends``: t, q, v at each) and where it lies (fraction of the interval)."""
+    def at(x: float) -> float:  # x: fraction of the interval
+        tx = float(ends[0] + x * (ends[3] - ends[0]))
+        return singular_ratio(model, hermite(*ends, tx)[0], tx, p)
+
+    k = int(np.argmin(_on_grid(model, p, ends, s, act, at)))
+    # the ratio dips in a V to zero: the grid may step over its tip, a bounded search
+    # between the grid's neighbours finds it. On the ratio's square, which is a parabola
+    # there (and smooth where it stays clear of zero), Brent's parabolic steps converge
+    # in 6-11 evaluations, where the V took 20-24
+    lo_s = s[k - 1] if k > 0 else 0.0
+    hi_s = s[k + 1] if k < s.size - 1 else 1.0
+    opt = minimize_scalar(lambda x: at(x) ** 2, bounds=(lo_s, hi_s), method="bounded",
+                          options={"xatol": 1e-9})
+    r_k = at(float(s[k]))
+    if opt.fun < r_k * r_k:
+        return float(opt.x), math.sqrt(float(opt.fun))
+    return float(s[k]), r_k
 
 
 def _samples(t: float, q: np.ndarray, v: np.ndarray, rec: Recorder, n0: int,

@@ -234,6 +234,54 @@ def design(mech: Mechanism, params: Sequence[str], bounds: Sequence[tuple[float,
     """
     wall0 = time.perf_counter()
     paths = check_params(mech, params)
+    x0, lo, hi = _checked(mech, paths, bounds, objective, driver, method)
+    targets = [parse_target(c, i, mech) for i, c in enumerate(constraints)]
+    fobj = peak_effort(driver or next(iter(mech.drivers))) if isinstance(objective, str) \
+        else objective
+    label = getattr(fobj, "label", getattr(fobj, "__name__", "objective"))
+    span = hi - lo
+    cache: dict[bytes, tuple] = {}
+    history: list[dict] = []
+
+    def evaluate(z: np.ndarray) -> tuple:
+        z = np.clip(np.asarray(z, float), 0.0, 1.0)
+        key = z.tobytes()
+        if key not in cache:
+            x = lo + z * span
+            m = with_params(mech, dict(zip(paths, x.tolist(), strict=True)))
+            try:
+                s = sensitivities(m, paths, t_end, **run_options)
+                f, g = fobj(s.result, s)
+                meas = [t.measure(s) for t in targets]
+            except CmmError as e:  # the design the optimiser tried, named
+                at = ", ".join(f"{p} = {float(v)!r}" for p, v in zip(paths, x, strict=True))
+                err = DesignError(f"at the design {at} (evaluation {len(history) + 1}): "
+                                  f"{e}")
+                err.history = history
+                raise err from e
+            cache[key] = (f, np.asarray(g, float) * span, meas, s)
+            history.append({"x": x.tolist(), "objective": f,
+                            "targets": [v for v, _ in meas], "z": z})
+        return cache[key]
+
+    cons = _scipy_constraints(targets, evaluate, span)
+    z0 = (x0 - lo) / span
+    first = evaluate(z0)
+    z_opt, success, message, nit = _optimise(evaluate, z0, cons, method, tol, max_iter,
+                                             history, targets, feas_tol)
+    best = evaluate(z_opt)
+    x_opt = lo + np.clip(z_opt, 0.0, 1.0) * span
+    return Design(with_params(mech, dict(zip(paths, x_opt.tolist(), strict=True))), paths,
+                  list(zip(lo.tolist(), hi.tolist(), strict=True)), x0, x_opt, label,
+                  first[0], best[0], targets, [v for v, _ in first[2]],
+                  [v for v, _ in best[2]], history, first[3], best[3], success, message,
+                  time.perf_counter() - wall0, nit)
+
+
+def _checked(mech: Mechanism, paths: list[str], bounds, objective, driver: str | None,
+             method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The start values and the bounds of the parameters (x0, lower, upper), every
+    problem with the study's arguments reported at once (a ModelError)."""
     bad: list[Problem] = []
     if method not in ("SLSQP", "trust-constr"):
         bad.append(Problem("design", "method", f"expected 'SLSQP' or 'trust-constr', got "
@@ -270,35 +318,13 @@ def design(mech: Mechanism, params: Sequence[str], bounds: Sequence[tuple[float,
                            f"got {objective!r}"))
     if bad:
         raise ModelError(bad, mech.source)
-    targets = [parse_target(c, i, mech) for i, c in enumerate(constraints)]
-    fobj = peak_effort(driver or next(iter(mech.drivers))) if isinstance(objective, str) \
-        else objective
-    label = getattr(fobj, "label", getattr(fobj, "__name__", "objective"))
-    span = hi - lo
-    cache: dict[bytes, tuple] = {}
-    history: list[dict] = []
+    return x0, lo, hi
 
-    def evaluate(z: np.ndarray) -> tuple:
-        z = np.clip(np.asarray(z, float), 0.0, 1.0)
-        key = z.tobytes()
-        if key not in cache:
-            x = lo + z * span
-            m = with_params(mech, dict(zip(paths, x.tolist(), strict=True)))
-            try:
-                s = sensitivities(m, paths, t_end, **run_options)
-                f, g = fobj(s.result, s)
-                meas = [t.measure(s) for t in targets]
-            except CmmError as e:  # the design the optimiser tried, named
-                at = ", ".join(f"{p} = {float(v)!r}" for p, v in zip(paths, x, strict=True))
-                err = DesignError(f"at the design {at} (evaluation {len(history) + 1}): "
-                                  f"{e}")
-                err.history = history
-                raise err from e
-            cache[key] = (f, np.asarray(g, float) * span, meas, s)
-            history.append({"x": x.tolist(), "objective": f,
-                            "targets": [v for v, _ in meas], "z": z})
-        return cache[key]
 
+def _scipy_constraints(targets: list[Target], evaluate: Callable, span: np.ndarray
+                       ) -> list[dict]:
+    """The targets as scipy's constraints on the scaled parameters z (value, min, max),
+    their values and gradients from ``evaluate(z)``."""
     cons = []
     for j, t in enumerate(targets):
         def val(z, j=j):
@@ -316,33 +342,36 @@ def design(mech: Mechanism, params: Sequence[str], bounds: Sequence[tuple[float,
         if t.max is not None:
             cons.append({"type": "ineq", "fun": lambda z, j=j, v=t.max: v - val(z, j),
                          "jac": lambda z, j=j: -grad(z, j)})
-    z0 = (x0 - lo) / span
-    first = evaluate(z0)
+    return cons
+
+
+def _best_so_far(history: list[dict], targets: list[Target], feas_tol: float) -> dict:
+    """The design evaluated so far that meets the targets best (within ``feas_tol``),
+    then has the smallest objective."""
+    def badness(h: dict) -> tuple[float, float]:
+        worst = 0.0
+        for t, v in zip(targets, h["targets"], strict=True):
+            if t.value is not None:
+                worst = max(worst, abs(v - t.value))
+            worst = max(worst, (t.min - v) if t.min is not None else 0.0,
+                        (v - t.max) if t.max is not None else 0.0)
+        return (max(worst, feas_tol), h["objective"])
+
+    return min(history, key=badness)
+
+
+def _optimise(evaluate: Callable, z0: np.ndarray, cons: list[dict], method: str, tol: float,
+              max_iter: int, history: list[dict], targets: list[Target], feas_tol: float
+              ) -> tuple[np.ndarray, bool, str, int]:
+    """scipy's optimiser on the scaled parameters: (z, success, message, iterations); where
+    a trial design could not be run, the best design evaluated so far, and why it
+    stopped."""
     try:
         opt = minimize(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1],
-                       bounds=[(0.0, 1.0)] * len(paths), constraints=cons, method=method,
+                       bounds=[(0.0, 1.0)] * z0.size, constraints=cons, method=method,
                        tol=tol, options={"maxiter": max_iter})
-        z_opt, success, message = opt.x, bool(opt.success), str(opt.message)
-        nit = int(getattr(opt, "nit", 0))
+        return opt.x, bool(opt.success), str(opt.message), int(getattr(opt, "nit", 0))
     except DesignError as e:
-        # a trial design could not be run: the best design evaluated so far (the one
-        # meeting the targets best, then the smallest objective), and why it stopped
-        def badness(h: dict) -> tuple[float, float]:
-            worst = 0.0
-            for t, v in zip(targets, h["targets"], strict=True):
-                if t.value is not None:
-                    worst = max(worst, abs(v - t.value))
-                worst = max(worst, (t.min - v) if t.min is not None else 0.0,
-                            (v - t.max) if t.max is not None else 0.0)
-            return (max(worst, feas_tol), h["objective"])
-
-        z_opt = min(history, key=badness)["z"]
-        success, nit = False, len(history)
-        message = f"stopped: {e}; the best design evaluated before it is returned"
-    best = evaluate(z_opt)
-    x_opt = lo + np.clip(z_opt, 0.0, 1.0) * span
-    return Design(with_params(mech, dict(zip(paths, x_opt.tolist(), strict=True))), paths,
-                  list(zip(lo.tolist(), hi.tolist(), strict=True)), x0, x_opt, label,
-                  first[0], best[0], targets, [v for v, _ in first[2]],
-                  [v for v, _ in best[2]], history, first[3], best[3], success, message,
-                  time.perf_counter() - wall0, nit)
+        z_opt = _best_so_far(history, targets, feas_tol)["z"]
+        return (z_opt, False, f"stopped: {e}; the best design evaluated before it is "
+                "returned", len(history))
