@@ -21,13 +21,13 @@ def _load(arg: str):
 
 def _summary(res) -> None:
     s = res.stats
-    print(f"{res.meta['mechanism']} ({s.method}): t = {res.t[0]:g} .. {res.t[-1]:g} s, "
+    print(f"{res.layout.mechanism} ({s.method}): t = {res.t[0]:g} .. {res.t[-1]:g} s, "
           f"{res.t.size} samples, {s.steps} steps, {s.nfev} residual / {s.njev} Jacobian "
           f"evaluations, {len(res.events)} events, wall {s.wall_time * 1e3:.1f} ms "
           f"(model build {s.build_time * 1e3:.1f} ms)")
     pos, vel = res.drift
     print(f"constraint drift: |Phi| <= {pos:.2e}, |Phi'| <= {vel:.2e}")
-    for name in res.meta["drivers"]:
+    for name in res.layout.drivers:
         e = res.driver(name).effort
         print(f"driver {name}: effort {e.min():.6g} .. {e.max():.6g}")
     if res.events:
@@ -180,12 +180,12 @@ def _plot(args: argparse.Namespace) -> int:
     res = _result_of(args.source, args.t_end)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    if res.meta["drivers"]:
+    if res.layout.drivers:
         written.append(plots.driving_effort([res], out / "driving.png"))
-    meta = res.watched_joints()
-    if meta:
-        written.append(plots.joint_motion([res], meta, out / "joints.png"))
-        written += [plots.joint_forces([res], j, out / f"forces_{j}.png") for j in meta]
+    watched = res.watched_joints()
+    if watched:
+        written.append(plots.joint_motion([res], watched, out / "joints.png"))
+        written += [plots.joint_forces([res], j, out / f"forces_{j}.png") for j in watched]
     written.append(plots.timeline([res], out / "timeline.png"))
     for p in written:
         print(f"wrote {p}")

@@ -256,3 +256,28 @@ def test_drift_at_default_tolerance(name):
     q = res.data["q"]
     xy = np.delete(q, np.s_[2::3], axis=1)  # the centroids' coordinates (m)
     assert pos <= 1e-8 * np.max(np.abs(xy)) and vel <= 1e-7
+
+
+def test_result_layout_is_its_mechanism_typed(tmp_path):
+    """``Result.layout``: the mechanism's names, types and geometry as typed fields (the
+    stored ``meta`` read through it); a result file written before a key existed reads
+    as that key's empty default, and the run's own entries stay in ``meta``."""
+    from cmm_dae.results.layout import Layout
+
+    mech = cd.load(Path(__file__).resolve().parent.parent / "models" / "slider_crank.toml")
+    res = cd.run_dae(mech, 0.05, output_dt=0.01)
+    lay = res.layout
+    assert lay.mechanism == mech.name and lay.joints == tuple(mech.joints)
+    assert lay.drivers == tuple(mech.drivers) and lay.bodies == tuple(mech.bodies)
+    assert [lay.joint_type(j) for j in mech.joints] == [j.type for j in mech.joints.values()]
+    assert [lay.coordinate_unit(j) for j in mech.joints] == [
+        "rad" if j.type == "revolute" else "m" for j in mech.joints.values()]
+    assert lay.connects == {n: (j.first, j.second) for n, j in mech.joints.items()}
+    assert lay.axes == {n: tuple(j.axis) for n, j in mech.joints.items()
+                        if j.type == "prismatic"}
+    saved = cd.load_result(res.save(tmp_path / "r.npz"))
+    assert saved.layout.body_points == lay.body_points and saved.layout.masses == lay.masses
+    old = {k: v for k, v in res.meta.items() if k not in ("curves", "gears", "frictional")}
+    assert Layout.of(old).curves == {} and Layout.of(old).gears == {}
+    assert Layout.of(old).frictional == ()
+    assert "tolerances" in res.meta and not hasattr(lay, "tolerances")

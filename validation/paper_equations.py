@@ -88,7 +88,7 @@ def rows(k: dict, version: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
 
 def kinematics(res: cd.Result, mech: cd.Mechanism, i: int) -> dict:
     d = res.data
-    ids = {n: k for k, n in enumerate(res.meta["bodies"])}
+    ids = {n: k for k, n in enumerate(res.layout.bodies)}
     q, a = d["q"][i], d["a"][i]
     v = d["v"][i]
     th = [q[3 * ids[n] + 2] for n in ("crank", "coupler", "link3")]

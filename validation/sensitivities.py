@@ -84,9 +84,9 @@ def parameters(m: cd.Mechanism) -> list[str]:
 def quantities(r: cd.Result, grid: np.ndarray) -> dict[str, np.ndarray]:
     return {"events": np.array([e.t for e in r.events]),
             "positions": np.concatenate([r.resample(grid, r.joint(j).position)
-                                         for j in r.meta["joints"]]),
+                                         for j in r.layout.joints]),
             "efforts": np.concatenate([r.resample(grid, r.driver(d).effort)
-                                       for d in r.meta["drivers"]]) if r.meta["drivers"]
+                                       for d in r.layout.drivers]) if r.layout.drivers
             else np.zeros(0)}
 
 
@@ -119,8 +119,8 @@ def check(path: Path, t_end: float, only: str = "",
                                for x in series])
 
     ours = {"events": s.event_times,
-            "positions": columns([s.joint(j).position for j in res.meta["joints"]]),
-            "efforts": columns([s.driver(d).effort for d in res.meta["drivers"]])}
+            "positions": columns([s.joint(j).position for j in res.layout.joints]),
+            "efforts": columns([s.driver(d).effort for d in res.layout.drivers])}
     walls_s, walls_r = [], []
     for _ in range(3):  # alternating, medians
         t0 = time.perf_counter()

@@ -37,27 +37,27 @@ class _Scene:
         if not (isinstance(max_frames, int) and max_frames >= 1):
             raise CmmError(f"frames: expected a whole number >= 1, got {max_frames!r}")
         self.res = res
-        meta = res.meta
+        lay = res.layout
         n = res.t.size
         self.idx = np.unique(np.linspace(0, n - 1, min(max_frames, n)).round().astype(int))
-        poses = {b: res.body(b).pose[self.idx] for b in meta["bodies"]}
+        poses = {b: res.body(b).pose[self.idx] for b in lay.bodies}
         self.poses = poses
         self.tracks = {b: np.stack([self.world(b, xy) for xy in pts.values()], axis=1)
-                       for b, pts in meta["body_points"].items()}
+                       for b, pts in lay.body_points.items()}
         self.markers: dict[str, np.ndarray] = {}
-        for j in meta.get("metamorphic", []):
-            body, pt = meta["connects"][j][1].split(".", 1)
+        for j in lay.metamorphic:
+            body, pt = lay.connects[j][1].split(".", 1)
             self.markers[j] = self.world(body, self._local(body, pt))
         pts = [tr.reshape(-1, 2) for tr in self.tracks.values()]
-        pts += [np.asarray(list(meta["ground"].values()), float).reshape(-1, 2)]
+        pts += [np.asarray(list(lay.ground.values()), float).reshape(-1, 2)]
         self._extent(pts)
-        self.guides = [self._guide(j) for j in meta.get("axes", {})]
+        self.guides = [self._guide(j) for j in lay.axes]
         # (a contact's limits are the ends of its curve, drawn with it)
-        self.rays = [r for j in meta.get("limits", {})
-                     if j not in meta.get("axes", {}) and j not in meta.get("curves", {})
+        self.rays = [r for j in lay.limits
+                     if j not in lay.axes and j not in lay.curves
                      for r in self._rays(j)]
-        self.curves = [self._curve(j) for j in meta.get("curves", {})]
-        self.curves += [c for g in meta.get("gears", {}).values() for c in self._pitch(g)]
+        self.curves = [self._curve(j) for j in lay.curves]
+        self.curves += [c for g in lay.gears.values() for c in self._pitch(g)]
         self._extent(pts + [g.reshape(-1, 2) for g, _ in self.guides]
                      + [c.reshape(-1, 2) for c in self.curves])
 
@@ -68,8 +68,8 @@ class _Scene:
         self.size = float(max(self.hi - self.lo)) or 1.0
 
     def _local(self, body: str, pt: str):
-        meta = self.res.meta
-        return pt if body == "ground" else meta["body_points"][body][pt]
+        lay = self.res.layout
+        return pt if body == "ground" else lay.body_points[body][pt]
 
     def angle(self, body: str) -> np.ndarray:
         return np.zeros(self.idx.size) if body == "ground" else self.poses[body][:, 2]
@@ -77,7 +77,7 @@ class _Scene:
     def world(self, body: str, xy) -> np.ndarray:
         """(frames, 2) world positions of a body point (``xy`` a ground point's name)."""
         if body == "ground":
-            return np.broadcast_to(np.asarray(self.res.meta["ground"][xy], float),
+            return np.broadcast_to(np.asarray(self.res.layout.ground[xy], float),
                                    (self.idx.size, 2))
         P = self.poses[body]
         c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
@@ -86,16 +86,16 @@ class _Scene:
 
     def _guide(self, j: str) -> tuple[np.ndarray, np.ndarray]:
         """Guide line (frames, 2, 2) and stop bars (frames, k, 2, 2) of a prismatic joint."""
-        meta = self.res.meta
-        body, pt = meta["connects"][j][0].split(".", 1)
+        lay = self.res.layout
+        body, pt = lay.connects[j][0].split(".", 1)
         origin = self.world(body, self._local(body, pt))
-        ax = np.asarray(meta["axes"][j], float)
+        ax = np.asarray(lay.axes[j], float)
         ax = ax / np.hypot(*ax)
         th = self.angle(body)
         c, s = np.cos(th), np.sin(th)
         u = np.column_stack([c * ax[0] - s * ax[1], s * ax[0] + c * ax[1]])
         perp = np.column_stack([-u[:, 1], u[:, 0]])
-        lo, up = meta.get("limits", {}).get(j, [None, None])
+        lo, up = lay.limits.get(j, [None, None])
         coord = self.res.joint(j).position[self.idx]
         ends = [v for v in (lo, up, float(coord.min()), float(coord.max())) if v is not None]
         a, b = min(ends), max(ends)
@@ -109,11 +109,11 @@ class _Scene:
     def _curve(self, j: str) -> np.ndarray:
         """A contact joint's curve (frames, n, 2): its circle, or its line over the stretch
         the point runs on (and its limits), drawn from the first body's frame."""
-        meta = self.res.meta
-        cv = meta["curves"][j]
-        b1, p1 = meta["connects"][j][0].split(".", 1)
-        b2, p2 = meta["connects"][j][1].split(".", 1)
-        o = np.asarray(self._local(b1, p1) if b1 != "ground" else meta["ground"][p1], float)
+        lay = self.res.layout
+        cv = lay.curves[j]
+        b1, p1 = lay.connects[j][0].split(".", 1)
+        b2, p2 = lay.connects[j][1].split(".", 1)
+        o = np.asarray(self._local(b1, p1) if b1 != "ground" else lay.ground[p1], float)
         if cv["kind"] == "circle":
             ang = np.linspace(0.0, 2.0 * math.pi, 73)
             local = o + cv["radius"] * np.column_stack([np.cos(ang), np.sin(ang)])
@@ -124,7 +124,7 @@ class _Scene:
             th = self.angle(b1)
             s = np.cos(th) * (P @ u) + np.sin(th) * (P[:, 1] * u[0] - P[:, 0] * u[1])
             ends = [float(s.min()), float(s.max())] + [
-                v for v in meta.get("limits", {}).get(j, []) if v is not None]
+                v for v in lay.limits.get(j, []) if v is not None]
             a, b = min(ends), max(ends)
             pad = 0.15 * (b - a) if b > a else 0.05 * self.size
             local = o + np.outer([a - pad, b + pad], u)
@@ -135,12 +135,12 @@ class _Scene:
     def _pitch(self, gear: list) -> list[np.ndarray]:
         """A gear pair's pitch circles (frames, 73, 2) about its axles (a pinion's alone
         beside a rack)."""
-        meta = self.res.meta
+        lay = self.res.layout
         first, second, ratio = gear
-        types = {j: j in meta.get("axes", {}) for j in (first, second)}  # prismatic?
+        types = {j: j in lay.axes for j in (first, second)}  # prismatic?
 
         def centre(j: str) -> np.ndarray:
-            body, pt = meta["connects"][j][1].split(".", 1)
+            body, pt = lay.connects[j][1].split(".", 1)
             return self.world(body, self._local(body, pt))
 
         ang = np.linspace(0.0, 2.0 * math.pi, 73)
@@ -156,13 +156,13 @@ class _Scene:
 
     def _rays(self, j: str) -> list[np.ndarray]:
         """Dashed rays (frames, 2, 2): where the second body's link lies at each limit."""
-        meta = self.res.meta
-        b1 = meta["connects"][j][0].split(".", 1)[0]
-        b2, p2 = meta["connects"][j][1].split(".", 1)
+        lay = self.res.layout
+        b1 = lay.connects[j][0].split(".", 1)[0]
+        b2, p2 = lay.connects[j][1].split(".", 1)
         if b2 == "ground":
             return []
-        pj = np.asarray(meta["body_points"][b2][p2], float)
-        others = [np.asarray(v, float) for k, v in meta["body_points"][b2].items() if k != p2]
+        pj = np.asarray(lay.body_points[b2][p2], float)
+        others = [np.asarray(v, float) for k, v in lay.body_points[b2].items() if k != p2]
         if not others:
             return []
         far = max(others, key=lambda v: float(np.hypot(*(v - pj))))
@@ -170,7 +170,7 @@ class _Scene:
         phi, length = math.atan2(d[1], d[0]), float(np.hypot(*d))
         at = self.world(b2, pj)
         out = []
-        for lim in meta["limits"][j]:
+        for lim in lay.limits[j]:
             if lim is None:
                 continue
             ang = self.angle(b1) + lim + phi
@@ -180,7 +180,7 @@ class _Scene:
 
     def figure(self):
         """The figure, and ``update(k)`` moving every artist to frame ``k``."""
-        res, meta = self.res, self.res.meta
+        res, lay = self.res, self.res.layout
         fig, ax = plt.subplots(figsize=(7.0, 5.0))
         pad = 0.1 * self.size
         ax.set_xlim(self.lo[0] - pad, self.hi[0] + pad)
@@ -188,7 +188,7 @@ class _Scene:
         ax.set_aspect("equal")
         ax.set(xlabel="x [m]", ylabel="y [m]")
         ax.grid(alpha=0.2)
-        g = np.asarray(list(meta["ground"].values()), float).reshape(-1, 2)
+        g = np.asarray(list(lay.ground.values()), float).reshape(-1, 2)
         ax.plot(g[:, 0], g[:, 1], "k^", ms=9, label="ground")
         guide_lines = [ax.plot([], [], "-", color="0.6", lw=6, alpha=0.5, zorder=1)[0]
                        for _ in self.guides]
@@ -212,7 +212,7 @@ class _Scene:
         def update(k: int):
             i = self.idx[k]
             cfg = res.configurations[res.configuration[i]]
-            title.set_text(f"{meta['mechanism']}   t = {res.t[i]:.3f} s\n{cfg.describe()}")
+            title.set_text(f"{lay.mechanism}   t = {res.t[i]:.3f} s\n{cfg.describe()}")
             for b, line in body_lines.items():
                 xy = self.tracks[b][k]
                 if closed[b]:
@@ -316,7 +316,7 @@ def html_animation(res: Result, *, fps: int = 20, max_frames: int = DEFAULT_FRAM
         Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE, colors=64).save(
             buf, format="PNG", optimize=False)
         urls.append("data:image/png;base64," + base64.b64encode(buf.getvalue()).decode())
-    uid = f"cmm{abs(hash((res.meta['mechanism'], res.t.size))) % 10**8}"
+    uid = f"cmm{abs(hash((res.layout.mechanism, res.t.size))) % 10**8}"
     return _PLAYER.replace("UID", uid).replace("FRAMES", json.dumps(urls)).replace(
         "DELAY", str(round(1000 / max(fps, 1))))
 

@@ -149,10 +149,10 @@ class Comparison:
         out.mkdir(parents=True, exist_ok=True)
         figs = plots.comparison_figures(self, out)
         figs.update(self.extra_figures)
-        name = self.a.meta["mechanism"]
+        name = self.a.layout.mechanism
         la, lb = self.a.stats.method, self.b.stats.method
         md = [f"# {name}: {la} vs {lb}", "",
-              f"Model: `{self.a.meta.get('source')}`. Differences on a common grid of "
+              f"Model: `{self.a.layout.source}`. Differences on a common grid of "
               f"{self.t.size} points ({int(self.mask.sum())} used, away from events).", "",
               "## Differences", "", "| series | max abs diff | RMS diff | max abs (a) | rel |",
               "|---|---:|---:|---:|---:|"]
@@ -215,7 +215,7 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         if not isinstance(r, Result):
             raise TypeError(f"compare expects two cmm_dae.Result objects (run_dae, "
                             f"run_iterative or Result.load), got {type(r).__name__} for {name}")
-    if a.meta["joints"] != b.meta["joints"] or a.meta["bodies"] != b.meta["bodies"]:
+    if a.layout.joints != b.layout.joints or a.layout.bodies != b.layout.bodies:
         raise CmmError("the two results are of different mechanisms")
     t_end = min(a.t[-1], b.t[-1])
     if dt is not None and not (isinstance(dt, int | float) and not isinstance(dt, bool)
@@ -236,8 +236,8 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         series.append(SeriesDiff(name, unit, float(np.max(np.abs(d), initial=0.0)),
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))
 
-    types = dict(zip(a.meta["joints"], a.meta["joint_types"], strict=True))
-    for name in a.meta["drivers"]:
+    types = dict(zip(a.layout.joints, a.layout.joint_types, strict=True))
+    for name in a.layout.drivers:
         unit = "N m" if types[name] == "revolute" else "N"
         add(f"driver {name} effort", unit, a.driver(name).effort, b.driver(name).effort)
     for name in a.watched_joints():
@@ -265,8 +265,8 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
 def _size(res: Result) -> float:
     """The mechanism's size, m: the largest distance of a body point from its body frame's
     origin or of a ground point from the origin (1 m when there is none)."""
-    pts = [p for pts in res.meta.get("body_points", {}).values() for p in pts.values()]
-    pts += list(res.meta.get("ground", {}).values())
+    pts = [p for pts in res.layout.body_points.values() for p in pts.values()]
+    pts += list(res.layout.ground.values())
     return max((math.hypot(*p) for p in pts), default=1.0) or 1.0
 
 

@@ -34,8 +34,8 @@ def _event_lines(ax, res: Result) -> None:
 
 
 def _unit(res: Result, joint: str) -> str:
-    i = res.meta["joints"].index(joint)
-    return "rad" if res.meta["joint_types"][i] == "revolute" else "m"
+    i = res.layout.joints.index(joint)
+    return "rad" if res.layout.joint_types[i] == "revolute" else "m"
 
 
 def _stacked(results: list[Result], names: list[str], series, labels, height: float,
@@ -66,9 +66,9 @@ def driving_effort(results: list[Result], path: Path) -> Path:
         unit = "N m" if _unit(r0, name) == "rad" else "N"
         what = "torque" if unit == "N m" else "force"
         return (f"driving {what} [{unit}]",
-                f"{r0.meta['mechanism']}: driving {what} at joint {name}")
+                f"{r0.layout.mechanism}: driving {what} at joint {name}")
 
-    return _stacked(results, r0.meta["drivers"], lambda r, n: r.driver(n).effort, labels,
+    return _stacked(results, r0.layout.drivers, lambda r, n: r.driver(n).effort, labels,
                     3.2, path)
 
 
@@ -101,7 +101,7 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
         _event_lines(ax, r0)
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
-    axes[0].set_title(f"{r0.meta['mechanism']}: constraint force/torque of joint {joint}\n"
+    axes[0].set_title(f"{r0.layout.mechanism}: constraint force/torque of joint {joint}\n"
                       "(first body on the second; torque about the second body's connect "
                       "point)", fontsize=10)
     axes[0].legend()
@@ -117,7 +117,7 @@ def differences(cmp: Comparison, path: Path) -> Path:
 
     a, b, t = cmp.a, cmp.b, cmp.t
 
-    names = [("driver", n) for n in a.meta["drivers"]] + \
+    names = [("driver", n) for n in a.layout.drivers] + \
         [("joint", n) for n in a.watched_joints()]  # never empty: watched falls back to all
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.6 * max(1, len(names))),
                              squeeze=False, sharex=True)
@@ -172,7 +172,7 @@ def timeline(results: list[Result], path: Path) -> Path:
     below = matplotlib.transforms.offset_copy(ax.transAxes, fig=fig, y=-34, units="points")
     ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
               bbox_transform=below, ncol=min(3, len(labels)), fontsize=8)
-    ax.set(xlabel="time [s]", title=f"{results[0].meta['mechanism']}: configurations "
+    ax.set(xlabel="time [s]", title=f"{results[0].layout.mechanism}: configurations "
            "(bands) and events (triangles)")
     fig.tight_layout()
     fig.savefig(path, dpi=110, bbox_inches="tight")
@@ -184,14 +184,14 @@ def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
     """Every figure of a comparison report, written into ``out``."""
     res = [cmp.a, cmp.b]
     figs = {}
-    if cmp.a.meta["drivers"]:  # an undriven mechanism has no driving effort to draw
+    if cmp.a.layout.drivers:  # an undriven mechanism has no driving effort to draw
         figs["Driving effort (paper Figs. 16, 23)"] = driving_effort(res, out / "driving.png")
 
-    meta = cmp.a.watched_joints()
-    if meta:
+    watched = cmp.a.watched_joints()
+    if watched:
         figs["Relative motion of the metamorphic joints (paper Fig. 17)"] = joint_motion(
-            res, meta, out / "joints.png")
-        for j in meta:
+            res, watched, out / "joints.png")
+        for j in watched:
             figs[f"Constraint force/torque of joint {j} (paper Figs. 18-19)"] = joint_forces(
                 res, j, out / f"forces_{j}.png")
     figs["Differences"] = differences(cmp, out / "differences.png")

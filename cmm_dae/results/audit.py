@@ -80,26 +80,26 @@ def energy_audit(res: Any) -> Energy:
     between events (the integrands jump there) takes over, and the residual measures the
     output spacing too.
     """
-    d, m = res.data, res.meta
-    mass = np.asarray(m["masses"])
+    d, m = res.data, res.layout
+    mass = np.asarray(m.masses)
     T = 0.5 * np.sum(mass * d["v"] ** 2, axis=1)
-    g = np.asarray(m["gravity"])
+    g = np.asarray(m.gravity)
     q = d["q"]
-    nb = len(m["bodies"])
+    nb = len(m.bodies)
     Vg = -sum(mass[3 * i] * (g[0] * q[:, 3 * i] + g[1] * q[:, 3 * i + 1]) for i in range(nb))
     Vs = np.zeros(res.t.size)
-    for name, (k, rest) in m["springs"].items():
+    for name, (k, rest) in m.springs.items():
         Vs = Vs + 0.5 * k * (res.joint(name).position - rest) ** 2
     P_diss = np.zeros(res.t.size)
-    for name, c in m["dampers"].items():
+    for name, c in m.dampers.items():
         P_diss = P_diss + c * res.joint(name).velocity ** 2
     Ve = np.zeros(res.t.size)
-    for k, (stiff, rest, damping, preload) in enumerate(m.get("elements", {}).values()):
+    for k, (stiff, rest, damping, preload) in enumerate(m.elements.values()):
         L, Ld = d["elem_len"][:, k], d["elem_rate"][:, k]
         Ve = Ve + 0.5 * stiff * (L - rest) ** 2 + preload * L
         P_diss = P_diss + damping * Ld**2
     P_drv = np.zeros(res.t.size)
-    for name in m["drivers"]:
+    for name in m.drivers:
         P_drv = P_drv + res.driver(name).effort * res.joint(name).velocity
     P_ld = np.sum(d["load_power"], axis=1) if "load_power" in d else np.zeros(res.t.size)
     P_fr = -np.sum(d["friction"] * d["cd"], axis=1) if "friction" in d \

@@ -27,8 +27,8 @@ def columns(res: Result) -> dict[str, np.ndarray]:
     cols: dict[str, np.ndarray] = {"t [s]": res.t,
                                    "configuration": labels[res.configuration],
                                    "configuration index": res.configuration}
-    meta = res.meta
-    for name, typ in zip(meta["joints"], meta["joint_types"], strict=True):
+    lay = res.layout
+    for name, typ in zip(lay.joints, lay.joint_types, strict=True):
         u = "rad" if typ == "revolute" else "m"
         js = res.joint(name)
         cols[f"joint {name} position [{u}]"] = js.position
@@ -37,10 +37,10 @@ def columns(res: Result) -> dict[str, np.ndarray]:
         cols[f"joint {name} force x [N]"] = js.force[:, 0]
         cols[f"joint {name} force y [N]"] = js.force[:, 1]
         cols[f"joint {name} torque [N m]"] = js.torque
-    for name in meta["drivers"]:
-        u = "N m" if meta["joint_types"][meta["joints"].index(name)] == "revolute" else "N"
+    for name in lay.drivers:
+        u = "N m" if lay.joint_types[lay.joints.index(name)] == "revolute" else "N"
         cols[f"driver {name} effort [{u}]"] = res.driver(name).effort
-    for name in meta["bodies"]:
+    for name in lay.bodies:
         b = res.body(name)
         for k, lab in enumerate(("x [m]", "y [m]", "theta [rad]")):
             cols[f"body {name} {lab}"] = b.pose[:, k]

@@ -16,6 +16,7 @@ from ..core.errors import STATUS_MESSAGES, CmmError, Status
 from ..core.records import Configuration, Event, Stats
 from .audit import Energy, energy_audit
 from .export import columns, save, to_csv, to_dataframe
+from .layout import Layout
 
 
 @dataclass(frozen=True)
@@ -120,12 +121,21 @@ class Result:
                  configurations: list[Configuration], events: list[Event], stats: Stats,
                  status: Status | str = Status.SUCCESS, message: str = "success"):
         self.meta = meta
+        self._layout: Layout | None = None
         self.data = _Series(data)
         self.configurations = configurations
         self.events = events
         self.stats = stats
         self.status = Status(status)
         self.message = message
+
+    @property
+    def layout(self) -> Layout:
+        """The mechanism this result belongs to, typed (:class:`Layout`): names, masses,
+        geometry. ``meta`` is its stored form, with what the run added."""
+        if self._layout is None:
+            self._layout = Layout.of(self.meta)
+        return self._layout
 
     # ---------------------------------------------------------------- accessors
     @property
@@ -173,17 +183,17 @@ class Result:
         """The joints worth watching: metamorphic joints (limits: geometric constraints),
         joints with friction and sprung joints (force constraints, like the double-folded
         mechanism's D); all joints when there are none of these."""
-        out = list(self.meta.get("metamorphic", []))
-        out += [j for j in self.meta.get("frictional", []) if j not in out]
-        out += [j for j in self.meta.get("springs", {}) if j not in out]
-        return out or list(self.meta["joints"])
+        out = list(self.layout.metamorphic)
+        out += [j for j in self.layout.frictional if j not in out]
+        out += [j for j in self.layout.springs if j not in out]
+        return out or list(self.layout.joints)
 
     def entered_configurations(self) -> list[int]:
         """Indices of the configurations the run was actually in, in order of first entry."""
         return list(dict.fromkeys(int(c) for c in self.configuration))
 
     def _index(self, kind: str, name: str) -> int:
-        names = list(self.meta.get(kind, []))
+        names = list(getattr(self.layout, kind, ()))
         if name not in names:
             raise CmmError(f"no {kind[:-1]} named {name!r} (known: {', '.join(names)})")
         return names.index(name)
@@ -218,7 +228,7 @@ class Result:
     def body(self, name: str) -> BodySeries:
         """Time series of body ``name`` (its frame, not its centroid)."""
         i = self._index("bodies", name)
-        cx, cy = self.meta["centroids"][i]
+        cx, cy = self.layout.centroids[i]
         q, v, a = (self.data[k][:, 3 * i:3 * i + 3] for k in ("q", "v", "a"))
         th, om, al = q[:, 2], v[:, 2], a[:, 2]
         c, s = np.cos(th), np.sin(th)
@@ -235,7 +245,7 @@ class Result:
             float(np.max(self.data["drift_vel"], initial=0.0))
 
     def __repr__(self) -> str:
-        return (f"Result({self.meta['mechanism']!r}, method={self.stats.method!r}, "
+        return (f"Result({self.layout.mechanism!r}, method={self.stats.method!r}, "
                 f"n={self.t.size}, t=[{self.t[0]:g}, {self.t[-1]:g}] s, "
                 f"events={len(self.events)}, status={self.status!r})")
 
@@ -261,7 +271,7 @@ class Result:
         lines += [f"(singular at t = {e.t:.9f} s: {e.note})" for e in self.events
                   if e.kind == "singular"]
         # a negative loss beyond round-off (a stick's vanishing impulse leaves ~1e-16 J)
-        if any(e.energy_lost < -1e-9 for e in self.events) and self.meta.get("drivers"):
+        if any(e.energy_lost < -1e-9 for e in self.events) and self.layout.drivers:
             lines.append("(E lost < 0: the driver's impulse does work at the impact, so the "
                          "mechanism can gain kinetic energy there)")
         return "\n".join(lines)

@@ -121,7 +121,7 @@ class Sensitivities:
     def body(self, name: str) -> BodySensitivity:
         """Derivative of body ``name``'s frame pose (as ``Result.body(name).pose``)."""
         i = self._k("bodies", name)
-        cx, cy = self.result.meta["centroids"][i]
+        cx, cy = self.result.layout.centroids[i]
         sq = self.data["q"][:, 3 * i:3 * i + 3]  # (n, 3, P)
         th = self.result.data["q"][:, 3 * i + 2]
         c, s = np.cos(th), np.sin(th)
@@ -253,7 +253,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
         # the reactions shared out at minimum norm over every row, a choice the pass does
         # not differentiate: their derivatives are not given
         data["jforce"][:], data["jtorque"][:] = np.nan, np.nan
-        sp.notes.append("redundant constraints (" + ", ".join(res.meta["redundant"]) +
+        sp.notes.append("redundant constraints (" + ", ".join(res.layout.redundant) +
                         "): the joint forces and torques are minimum-norm reactions; "
                         "their derivatives are not given (NaN)")
     if solved:

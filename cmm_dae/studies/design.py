@@ -46,7 +46,7 @@ def peak_effort(driver: str | None = None) -> Callable[[Result, Sensitivities],
     nothing to first order)."""
 
     def objective(res: Result, s: Sensitivities) -> tuple[float, np.ndarray]:
-        name = driver if driver is not None else res.meta["drivers"][0]
+        name = driver if driver is not None else res.layout.drivers[0]
         eff = res.driver(name).effort
         i = int(np.argmax(np.abs(eff)))
         return float(abs(eff[i])), np.sign(eff[i]) * s.driver(name).effort[i]
@@ -140,7 +140,7 @@ class Design:
         fig, ax = plt.subplots(figsize=(8, 4))
         for s, lab in ((self.before, "start"), (self.after, "optimum")):
             r = s.result
-            for d in r.meta["drivers"]:
+            for d in r.layout.drivers:
                 ax.plot(r.t, r.driver(d).effort, label=f"{lab}: driver {d}")
             for e in r.events:
                 ax.axvline(e.t, color="0.7", lw=0.6)

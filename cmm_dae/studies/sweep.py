@@ -60,7 +60,7 @@ def default_metrics(res: Result) -> dict[str, float]:
         k = (e.kind, e.joint)
         count[k] = count.get(k, 0) + 1
         out[f"t_{e.kind}_{e.joint}_{count[k]}"] = e.t
-    for d in res.meta["drivers"]:
+    for d in res.layout.drivers:
         out[f"peak_effort_{d}"] = float(np.max(np.abs(res.driver(d).effort)))
     out["energy_residual"] = float(np.max(np.abs(res.energy().residual)))
     return out
