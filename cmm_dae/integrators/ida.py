@@ -37,16 +37,13 @@ from .ida_steps import (
     quiet_sundials,
     segment_times,
 )
-from .tolerances import (
-    ATOL_LAMBDA,
-    lambda_atol,
-    lambda_scale,
-    tolerances,
-)
+from .tolerances import ATOL_LAMBDA, lambda_atol, lambda_scale, tolerances
 
-#: Size of the DAE (2 nq + 2 m unknowns) from which linsolver="auto" takes the sparse
-#: solver (measured cross-over on chains of four-bar loops: validation/benchmark.py).
-SPARSE_FROM = 300
+#: IDA's unknowns from which linsolver="auto" is sparse, where at most SPARSE_FILL of the
+#: Jacobian is nonzero. Dense over sparse wall time at rtol 1e-6 / 1e-10: A02, 6 loops (98
+#: unknowns, 4.4 %) 1.00 / 0.88; 8 (130, 3.3 %) 1.05 / 1.09; 12 (194) 1.11 / 1.27; 32
+#: (514) 1.19-1.86; the shipped models (50-70 unknowns, 7-9 %) 0.93-1.11.
+SPARSE_FROM, SPARSE_FILL = 120, 0.05
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
@@ -90,7 +87,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
         # derivatives outside it, so they keep the dense one
         self.sparse = not model.callables and (
-            opts.linsolver == "sparse" or (opts.linsolver == "auto" and u.N >= SPARSE_FROM))
+            opts.linsolver == "sparse" or (opts.linsolver == "auto" and u.N >= SPARSE_FROM
+                                           and u.jac_pattern.nnz() <= SPARSE_FILL * u.N**2))
         self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
         self.ls_options: dict = {}
         if self.sparse:
