@@ -49,7 +49,9 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     try:
         first = cross(t, q, v)
     except SolverError as e:
-        if e.status != Status.DEAD_POINT or retry is None:
+        # a dead point, or no singular position where IDA gave up: an earlier start may
+        # still find one (the second-order path from IDA's state can miss it)
+        if e.status not in (Status.DEAD_POINT, Status.INTEGRATOR) or retry is None:
             raise
         error = e
     cr, kept = first, None

@@ -38,6 +38,13 @@ PAST_RATIO = 0.1
 #: out if the ratio back where it extrapolates to zero is below this share of the ratio at
 #: the failure.
 LEAVING_RATIO = 0.25
+#: A failure ahead of which the ratio, along the motion, stays above this share of its
+#: value there is no singular position: the ratio of Andrews' squeezer is 3e-3 throughout
+#: and dips a little; IDA failing on its stiff spring at rtol 1e-3 was crossed as one and
+#: reported as a dead point. (Ahead of a singular position it falls to 1e-6 or less.)
+NO_COLLAPSE = 0.25
+
+
 def ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
 
@@ -123,6 +130,15 @@ class Start:
         """The motion ahead (tau > 0, s) or behind, to second order."""
         return self.q + self.v * tau + 0.5 * self.a0 * tau * tau
 
+    def not_singular(self, where: str) -> SolverError:
+        """IDA's failure here, where no singular position lies ``where`` ("ahead"): the
+        constraints' ratio is only low (see :data:`NO_COLLAPSE`)."""
+        return SolverError(f"IDA could not continue at t = {self.t:.9g} s and no singular "
+                           f"position lies {where} (the constraints' singular-value ratio "
+                           f"{self.r0:.1e} does not collapse there): the forces may be too "
+                           "stiff for these tolerances; another rtol may pass",
+                           status=Status.INTEGRATOR)
+
     def dead(self, why: str) -> SolverError:
         return SolverError(f"dead point at t = {self.t:.9g} s: the constraints of "
                            f"{row_names(self.labels) or 'the mechanism'} become dependent "
@@ -174,6 +190,8 @@ def plan_ahead(st: Start, rtol: float, atol: float, node_ratio: float) -> Plan:
     tau = float(opt.x)
     if not 0.0 < tau < 2.9 * tau_lin:
         raise st.dead("no singular instant was found ahead")
+    if opt.fun > NO_COLLAPSE * r0:
+        raise st.not_singular("ahead")
     t_s = t + tau
     # Gauss steps of tau / nsub: the singular instant is a step end; then on until the
     # constraints are as well conditioned as where the integrator stopped, AFTER times

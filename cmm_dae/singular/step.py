@@ -35,11 +35,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.errors import SolverError
 from ..equations.kinematics import dependent_rows, rank_drop
 from ..equations.model import Model
 from .approach import (  # noqa: F401 (the crossing's thresholds, importable from here)
     END_RATIO,
     FINE_NODE_RATIO,
+    NO_COLLAPSE,
     NODE_RATIO,
     PAST_RATIO,
     Plan,
@@ -245,6 +247,16 @@ def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
     constraints close, the velocities did not jump, the ratio recovered), the rank drop
     and the instant located along the Gauss steps: the :class:`Crossing`."""
     model, p, t, r0, nsub = st.model, st.p, st.t, st.r0, plan.nsub
+
+    def failed(why: str) -> SolverError:
+        # where the Gauss steps reached the "instant" the constraints had not collapsed
+        # (the second-order path had: Andrews' squeezer at 1000 rad/s, 0.016 s ahead): no
+        # singular position, IDA's own failure; else a dead point
+        if not plan.past and nsub >= 1 and \
+                ratio(model, ends[nsub][1], ends[nsub][0], p) > NO_COLLAPSE * r0:
+            return st.not_singular("ahead")
+        return st.dead(why)
+
     q1, v1, dq = project(model, p, qq, vv, tt)
     act = model.active_rows(p)
     closes = float(np.max(np.abs(model.constraints(q1, tt, p).phi[act]), initial=0.0))
@@ -252,12 +264,12 @@ def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
     r1 = ratio(model, q1, tt, p)
     scale = max(float(np.max(np.abs(q1), initial=0.0)), 1.0)
     if closes > 1e-10 * scale:
-        raise st.dead(f"beyond it the constraints cannot be satisfied (residual "
-                      f"{closes:.1e}): the mechanism cannot follow its drivers through "
-                      "this position")
+        raise failed(f"beyond it the constraints cannot be satisfied (residual "
+                     f"{closes:.1e}): the mechanism cannot follow its drivers through "
+                     "this position")
     if jump > 1e-5 or dq > 1e-6 * scale or (tt < t_end and r1 < r0):
-        raise st.dead(f"the motion cannot continue through it (velocity change "
-                      f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
+        raise failed(f"the motion cannot continue through it (velocity change "
+                     f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
     t_s, labels = plan.t_s, st.labels
     # counted where the Gauss steps reach the instant (the second-order path ahead is
     # off there by its error, enough to miss most of a large rank drop)
