@@ -206,7 +206,13 @@ def _bench(args: argparse.Namespace) -> int:
                            "models and no --chain with it")
         if not args.loops or any(n < 1 for n in args.loops):
             raise CmmError(f"--loops must be integers >= 1, not {args.loops}")
+        if not args.steps or not all(0.0 < h <= 1e-3 for h in args.steps):
+            raise CmmError(f"--steps must be MuJoCo steps in (0, 1e-3] s, not {args.steps}")
+        from .studies.peers_andrews import andrews_table, compare_andrews
+
         print(peers_table([compare_a02(n, repeat=args.repeat) for n in args.loops]))
+        print()
+        print(andrews_table([compare_andrews(h, repeat=args.repeat) for h in args.steps]))
         return 0
     paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,
