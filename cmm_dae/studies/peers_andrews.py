@@ -23,7 +23,7 @@ from ..description.loader import load
 from ..description.mechanism import Mechanism
 from ..simulation.runner import run_dae
 from .bench import best_time
-from .peers import RTOLS, _mujoco
+from .peers import RATIO_NOTE, RTOLS, _mujoco, cheapest
 
 __all__ = ["ANDREWS_003", "ANDREWS_Y0", "andrews_mujoco", "andrews_table",
            "compare_andrews"]
@@ -104,17 +104,14 @@ def compare_andrews(h: float, *, repeat: int = 3, rtols: tuple[float, ...] = RTO
     MuJoCo's (above 1: MuJoCo is faster)."""
     mech = load(example("andrews_squeezer"))
     err_mj = _error(andrews_mujoco(h))
-    chosen, err = None, math.nan
-    for rtol in rtols:
+
+    def error_at(rtol: float) -> float | None:  # None: too loose for the stiff spring
         res = run_dae(mech, 0.03, rtol=rtol, output_dt=None, throw=False)
-        if not res.success:  # too loose for the stiff spring: IDA gives up
-            continue
-        err = _error({k: float(res.joint(k).position[-1]) for k in ANDREWS_003})
-        if err <= err_mj:
-            chosen = rtol
-            break
-    row = {"h": h, "mujoco_error": err_mj, "rtol": chosen,
-           "cmm_dae_error": err if chosen is not None else math.nan}
+        return (_error({k: float(res.joint(k).position[-1]) for k in ANDREWS_003})
+                if res.success else None)
+
+    chosen, err = cheapest(error_at, err_mj, rtols)
+    row = {"h": h, "mujoco_error": err_mj, "rtol": chosen, "cmm_dae_error": err}
     row["mujoco_s"] = best_time(lambda: andrews_mujoco(h), repeat)[0]
     row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, 0.03, rtol=chosen, output_dt=None),
                                   repeat)[0] if chosen is not None else math.nan)
@@ -132,6 +129,5 @@ def andrews_table(rows: list[dict]) -> str:
         rtol = f"{r['rtol']:.0e}" if r["rtol"] is not None else "none"
         lines.append(f"{r['h']:>8.0e}  {r['mujoco_error']:>10.2e}  {rtol:>12}  "
                      f"{r['cmm_dae_error']:>11.2e}  {r['ratio']:>10.2f}")
-    lines.append("time ratio: cmm_dae's wall time over MuJoCo's (RK4, loops closed by soft "
-                 "constraints of time constant 2 h), best of warm runs side by side")
+    lines.append(RATIO_NOTE)
     return "\n".join(lines)
