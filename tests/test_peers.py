@@ -37,8 +37,9 @@ def test_compare_picks_the_cheapest_tolerance_reaching_mujocos_error():
         assert not res.success or peers._error(res.t, iftomm.crank_tip(res), 1) \
             > row["mujoco_error"]
     assert math.isclose(row["ratio"], row["cmm_dae_s"] / row["mujoco_s"])
-    # the first run of a new mechanism object builds its model: it takes longer
-    assert row["cmm_dae_first_s"] > row["cmm_dae_s"] > 0
+    # both times are reported (compared only in the benchmark: a test never times)
+    assert math.isfinite(row["cmm_dae_first_s"]) and row["cmm_dae_first_s"] > 0
+    assert math.isclose(row["first_ratio"], row["cmm_dae_first_s"] / row["mujoco_s"])
     assert "time ratio" in peers.peers_table([row])
 
 
