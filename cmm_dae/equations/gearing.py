@@ -19,7 +19,20 @@ import numpy as np
 
 from ..description.mechanism import GROUND
 
-__all__ = ["tooth"]
+__all__ = ["pinion_radius", "pitch_radius", "tooth"]
+
+
+def pitch_radius(dist: Any, ratio: float) -> Any:
+    """The second gear's pitch radius of two gears on axles ``dist`` apart (m; the first
+    gear's is ``|ratio|`` times it): the axles are r_a + r_b apart in an external mesh
+    (ratio -r_a / r_b), |r_b - r_a| in an internal one (ratio r_a / r_b > 0)."""
+    return dist / abs(1.0 - ratio)
+
+
+def pinion_radius(ratio: float, rack_second: bool) -> float:
+    """The pinion's pitch radius beside its rack, m: ``|ratio|`` where the rack is the
+    pair's second joint (m/rad), ``1 / |ratio|`` where it is the first (rad/m)."""
+    return abs(ratio) if rack_second else 1.0 / abs(ratio)
 
 
 def tooth(model: Any, name: str, lam_g: Any, point: Callable[[int], tuple],
@@ -44,9 +57,7 @@ def tooth(model: Any, name: str, lam_g: Any, point: Callable[[int], tuple],
         dx, dy = bx - ax, by - ay
         dist = (dx * dx + dy * dy) ** 0.5
         ux, uy = dx / dist, dy / dist  # from the first gear's axle to the second's
-        # the second gear's pitch radius: the axles are r_a + r_b apart in an external
-        # mesh (ratio -r_a / r_b), |r_b - r_a| in an internal one (ratio r_a / r_b > 0)
-        rb = dist / abs(1.0 - gr.ratio)
+        rb = pitch_radius(dist, gr.ratio)
         tb = tau[gr.second]
         # the pitch point P: P - b = -rb u (between the axles; beyond the pinion where b
         # is the ring), +rb u where a is the ring and b the pinion inside it
@@ -72,7 +83,7 @@ def tooth(model: Any, name: str, lam_g: Any, point: Callable[[int], tuple],
     tr = tau[rack]
     fx = tr * axx + abs(tr) * tan_a * nx
     fy = tr * axy + abs(tr) * tan_a * ny
-    rp = abs(gr.ratio) if jb.type == "prismatic" else 1.0 / abs(gr.ratio)
+    rp = pinion_radius(gr.ratio, jb.type == "prismatic")
     qx, qy = px + rp * nx, py + rp * ny  # the pitch point
     # the model applied tr along the axis at the rack's point; the teeth apply the force
     # at the pitch point: the guide carries the difference and its moment

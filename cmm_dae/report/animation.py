@@ -22,6 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..core.errors import CmmError  # noqa: E402
+from ..equations.gearing import pinion_radius, pitch_radius  # noqa: E402
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..results.result import Result
@@ -148,11 +149,10 @@ class _Scene:
         if not any(types.values()):
             a, b = centre(first), centre(second)
             dist = np.hypot(*(b - a).T)[:, None, None]
-            rb = dist / abs(1.0 - ratio)  # external: r_a + r_b apart; internal: |r_b - r_a|
+            rb = pitch_radius(dist, ratio)
             return [a[:, None, :] + abs(ratio) * rb * ring, b[:, None, :] + rb * ring]
         pinion = first if types[second] else second
-        radius = abs(ratio) if types[second] else 1.0 / abs(ratio)
-        return [centre(pinion)[:, None, :] + radius * ring]
+        return [centre(pinion)[:, None, :] + pinion_radius(ratio, types[second]) * ring]
 
     def _rays(self, j: str) -> list[np.ndarray]:
         """Dashed rays (frames, 2, 2): where the second body's link lies at each limit."""
