@@ -30,8 +30,8 @@ from ..description import iftomm
 from ..simulation.runner import run_dae
 from .bench import best_time
 
-__all__ = ["RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "compare_a02", "mujoco_available",
-           "peers_table"]
+__all__ = ["COLUMNS", "RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "columns", "compare_a02",
+           "mujoco_available", "peers_table"]
 
 #: The tolerances cmm_dae tries, loosest first (atol = 1e-2 rtol as in any run).
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
@@ -117,6 +117,19 @@ RATIO_NOTE = ("time ratio: cmm_dae's wall time over MuJoCo's (RK4, loops closed 
               "constraints of time constant 2 h), best of warm runs side by side")
 
 
+#: The columns both comparisons share, and one row's values in them.
+COLUMNS = (f"{'MuJoCo h':>8}  {'MuJoCo err':>10}  {'cmm_dae rtol':>12}  {'cmm_dae err':>11}  "
+           f"{'time ratio':>10}")
+
+
+def columns(row: dict) -> str:
+    """A comparison row's MuJoCo step and error, cmm_dae's tolerance ("none" where none
+    reached MuJoCo's error) and error, and the time ratio, under :data:`COLUMNS`."""
+    rtol = f"{row['rtol']:.0e}" if row["rtol"] is not None else "none"
+    return (f"{row['h']:>8.0e}  {row['mujoco_error']:>10.2e}  {rtol:>12}  "
+            f"{row['cmm_dae_error']:>11.2e}  {row['ratio']:>10.2f}")
+
+
 def _error(t: np.ndarray, tip: np.ndarray, n: int) -> float:
     return float(np.max(np.linalg.norm(tip - iftomm.a02_reference(n, t), axis=1)))
 
@@ -165,13 +178,8 @@ def peers_table(rows: list[dict]) -> str:
     """The comparison as text, one line per problem size."""
     lines = ["A02 four-bar chain, 2 s, equal accuracy (largest crank-tip error against the "
              "reference)",
-             f"{'loops':>5}  {'MuJoCo h':>8}  {'MuJoCo err':>10}  {'cmm_dae rtol':>12}  "
-             f"{'cmm_dae err':>11}  {'time ratio':>10}  {'first run':>9}"]
-    for r in rows:
-        rtol = f"{r['rtol']:.0e}" if r["rtol"] is not None else "none"
-        lines.append(f"{r['loops']:>5}  {r['h']:>8.0e}  {r['mujoco_error']:>10.2e}  "
-                     f"{rtol:>12}  {r['cmm_dae_error']:>11.2e}  {r['ratio']:>10.2f}  "
-                     f"{r['first_ratio']:>9.2f}")
+             f"{'loops':>5}  {COLUMNS}  {'first run':>9}"]
+    lines += [f"{r['loops']:>5}  {columns(r)}  {r['first_ratio']:>9.2f}" for r in rows]
     lines.append(f"{RATIO_NOTE}; first run: cmm_dae's run that builds the model, over "
                  "MuJoCo's")
     return "\n".join(lines)

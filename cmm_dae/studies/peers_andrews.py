@@ -23,7 +23,7 @@ from ..description.loader import load
 from ..description.mechanism import Mechanism
 from ..simulation.runner import run_dae
 from .bench import best_time
-from .peers import RATIO_NOTE, RTOLS, _mujoco, cheapest
+from .peers import COLUMNS, RATIO_NOTE, RTOLS, _mujoco, cheapest, columns
 
 __all__ = ["ANDREWS_003", "ANDREWS_Y0", "andrews_mujoco", "andrews_table",
            "compare_andrews"]
@@ -123,11 +123,7 @@ def andrews_table(rows: list[dict]) -> str:
     """The squeezer's comparison as text, one line per MuJoCo step."""
     lines = ["Andrews' squeezer, 0.03 s, equal accuracy (largest error of the seven "
              "coordinates at 0.03 s against the Test Set, rad)",
-             f"{'MuJoCo h':>8}  {'MuJoCo err':>10}  {'cmm_dae rtol':>12}  "
-             f"{'cmm_dae err':>11}  {'time ratio':>10}"]
-    for r in rows:
-        rtol = f"{r['rtol']:.0e}" if r["rtol"] is not None else "none"
-        lines.append(f"{r['h']:>8.0e}  {r['mujoco_error']:>10.2e}  {rtol:>12}  "
-                     f"{r['cmm_dae_error']:>11.2e}  {r['ratio']:>10.2f}")
+             COLUMNS]
+    lines += [columns(r) for r in rows]
     lines.append(RATIO_NOTE)
     return "\n".join(lines)
