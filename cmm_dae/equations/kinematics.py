@@ -10,7 +10,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 from scipy.linalg import solve_triangular
 
-from . import rank
+from . import kkt, rank
 from .build import Constraints
 from .model import Model
 from .unknowns import ground_pins
@@ -75,7 +75,7 @@ def _augmented_lu(J: np.ndarray, nonzeros: tuple[np.ndarray, np.ndarray] | None 
     """Sparse LU of ``[[I, J^T], [J, 0]]`` for a sparse ``J`` (None where it is dense or
     the system exactly singular), its CSC arrays assembled directly: column j < n holds
     the 1 at row j and J's column j below it, column n + i J's row i. ``nonzeros``: J's
-    (rows, columns) in row-major order where known (:func:`structure`), else found."""
+    (rows, columns) in row-major order where known (:func:`active_nonzeros`), else found."""
     m, n = J.shape
     # row-major: J's rows in order
     ri, ci = nonzeros if nonzeros is not None else np.nonzero(J)
@@ -113,7 +113,7 @@ def _augmented_lu(J: np.ndarray, nonzeros: tuple[np.ndarray, np.ndarray] | None 
 _STRUCTURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def structure(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def active_nonzeros(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The structural nonzeros (rows, columns; row-major) of the active rows ``act`` of a
     large model's Phi_q, from its CasADi pattern, kept per model and row set (None below
     :data:`SPARSE_ROWS` rows): finding them in the dense matrix took 4.3 of 25 s on A02
@@ -154,7 +154,7 @@ def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarra
         # the last factorization while it still converges fast (a simplified Newton
         # step); a new one where it did not shrink the residual tenfold
         if solver is None or not r_max < 0.1 * r_prev:
-            solver = MinNorm(con.Phi_q[act], rcond, structure(model, act))
+            solver = MinNorm(con.Phi_q[act], rcond, active_nonzeros(model, act))
         r_prev = r_max
         q = q - solver.solve(r)
     return q, None
@@ -190,14 +190,39 @@ def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: 
     if con is None:
         con = model.constraints(q, t, p)
     J = con.Phi_q[act]
-    return v - MinNorm(J, rcond, structure(model, act)).solve(J @ v + con.Phi_t[act])
+    return v - MinNorm(J, rcond, active_nonzeros(model, act)).solve(J @ v + con.Phi_t[act])
 
 
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     """Smallest over largest singular value of the active constraint rows at q (0 when
     they are dependent): :func:`dependent_rows`' measure alone, without the singular
-    vectors (several times cheaper on large constraint sets)."""
-    return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
+    vectors (several times cheaper on large constraint sets). Where the rows' Gram matrix
+    has a narrow band (a long chain: bandwidth 5), from that band
+    (:func:`cmm_dae.equations.rank.band_ratio`, on the banded structure the KKT module
+    keeps for the model and these rows) down to its trusted ratio, else by the SVD."""
+    act = model.active_rows(p)
+    J = model.constraints(q, t, p).Phi_q[act]
+    band = _gram_band(model, act) if act.size <= model.nq else None
+    if band is not None:
+        vals = J[band.rows, band.cols]
+        ab = (band.to_band.T @ (vals[band.pa] * vals[band.pb])).reshape(-1, band.m)
+        r = rank.band_ratio(ab[2 * band.bw:])  # the lower half of dgbsv's storage
+        if r >= rank.BANDED_TRUSTED:
+            return r
+    return rank.ratio(J)
+
+
+def _gram_band(model: Model, act: np.ndarray) -> kkt.BandedSchur | None:
+    """The banded structure of the active rows' Gram matrix (:func:`kkt.structure` with
+    unit masses), kept per model and row set; None for few rows or a wide band."""
+    nz = active_nonzeros(model, act)
+    if nz is None:
+        return None
+    per_model = _STRUCTURES[model]  # filled by active_nonzeros
+    key = ("band", act.tobytes())
+    if key not in per_model:
+        per_model[key] = kkt.structure(nz[0], nz[1], act.size)
+    return per_model[key]
 
 
 def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -> int:

@@ -10,12 +10,10 @@ singular-position logic of both integrators."""
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.linalg import eig_banded
 from scipy.linalg import null_space as _null_space
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["BANDED_ROWS", "BANDED_TRUSTED", "COLLAPSE", "RANK_TOL", "collapsed", "dependent",
+__all__ = ["BANDED_TRUSTED", "COLLAPSE", "RANK_TOL", "band_ratio", "collapsed", "dependent",
            "null_space", "rank", "ratio"]
 
 #: Relative size (to the largest) below which a singular value counts as zero: the
@@ -32,58 +30,33 @@ def singular_values(J: np.ndarray) -> np.ndarray:
     return np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
 
 
-#: Rows from which :func:`ratio` tries the banded path (a long chain's Jacobian).
-BANDED_ROWS = 100
-#: ... taken where J has at most this share of nonzeros and J J^T, reordered, a bandwidth
-#: of at most this share of its size.
-BANDED_FILL = 0.05
-#: ... and trusted down to this ratio: its eigenvalues are those of J J^T, the squares of
-#: J's singular values, exact to round-off of the largest, so a ratio r comes out with a
-#: relative error of about 1e-16 / r^2 (6.5e-9 at r = 7e-5 on A02 with 32 loops); below
-#: it the SVD's own ratio is taken (where a singular instant is located).
+#: A ratio from :func:`band_ratio` is trusted down to this: its eigenvalues are those of
+#: J J^T, the squares of J's singular values, exact to round-off of the largest, so a ratio
+#: r comes out with a relative error of about 1e-16 / r^2 (6.5e-9 at r = 7e-5 on A02 with
+#: 32 loops); below it the SVD's own ratio is taken (where a singular instant is located).
 BANDED_TRUSTED = 1e-4
 
 
 def ratio(J: np.ndarray) -> float:
     """Smallest over largest singular value of the rows ``J`` (n_rows, n_coords): 1 for no
     rows (nothing can be dependent), 0 for more rows than coordinates (they must be) or a
-    zero matrix.
-
-    A large sparse J whose Gram matrix J J^T has a narrow band once reordered (reverse
-    Cuthill-McKee: a chain of four-bar loops has bandwidth 5) gives the ratio from the
-    extreme eigenvalues of that band (LAPACK's dsbevx, O(rows band^2)) instead of an SVD
-    (O(rows^3): 72 ms for the 770 rows of A02 with 128 loops), where it is at least
-    :data:`BANDED_TRUSTED`."""
+    zero matrix."""
     if J.shape[0] == 0:
         return 1.0
     if J.shape[0] > J.shape[1]:
         return 0.0
-    if J.shape[0] >= BANDED_ROWS:
-        r = _banded_ratio(J)
-        if r is not None and r >= BANDED_TRUSTED:
-            return r
     s = singular_values(J)
     return float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
 
 
-def _banded_ratio(J: np.ndarray) -> float | None:
-    """:func:`ratio` from the band of the reordered J J^T; None where J is not sparse or
-    the band not narrow (see :data:`BANDED_FILL`)."""
-    S = sp.csr_matrix(J)
-    m = J.shape[0]
-    if S.nnz > BANDED_FILL * J.size:
-        return None
-    G = (S @ S.T).tocsr()
-    perm = reverse_cuthill_mckee(G, symmetric_mode=True)
-    Gp = G[perm][:, perm].tocoo()
-    low = Gp.row >= Gp.col
-    r, c = Gp.row[low], Gp.col[low]
-    band = int(np.max(r - c, initial=0))
-    if band > BANDED_FILL * m:
-        return None
-    ab = np.zeros((band + 1, m))
-    ab[r - c, c] = Gp.data[low]
-    lo, hi = (float(eig_banded(ab, lower=True, eigvals_only=True, select="i",
+def band_ratio(lower: np.ndarray) -> float:
+    """:func:`ratio` of the rows J from the lower band (LAPACK's storage: ``lower[i - j, j]``
+    for i >= j) of their Gram matrix J J^T, reordered to a narrow band: the square root of
+    its extreme eigenvalues' ratio (LAPACK's dsbevx, O(rows^2 band) against the SVD's
+    O(rows^3): 72 ms for the 770 rows of A02 with 128 loops). Trusted down to
+    :data:`BANDED_TRUSTED`."""
+    m = lower.shape[1]
+    lo, hi = (float(eig_banded(lower, lower=True, eigvals_only=True, select="i",
                                select_range=(k, k))[0]) for k in (0, m - 1))
     return float(np.sqrt(lo / hi)) if hi > 0.0 and lo > 0.0 else 0.0
 

@@ -12,8 +12,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..core.errors import SolverError, Status
-from ..equations import rank
-from ..equations.kinematics import dependent_rows, row_names
+from ..equations.kinematics import dependent_rows, row_names, singular_ratio
 from ..equations.model import Model
 from .gauss import GL_C, accurate_step, gl2_step
 from .instant import singular_instant
@@ -45,8 +44,8 @@ LEAVING_RATIO = 0.25
 NO_COLLAPSE = 0.25
 
 
-def ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
-    return rank.ratio(model.constraints(q, t, p).Phi_q[model.active_rows(p)])
+#: The active constraint rows' singular-value ratio at (q, t): the kinematics' own.
+ratio = singular_ratio
 
 
 def ratio_rate(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
