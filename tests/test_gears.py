@@ -223,8 +223,8 @@ def test_gears_on_different_carriers_are_refused():
     (lambda: internal_pair(ring_first=True), "bodies.pinion.inertia", ("R", "P"))])
 def test_sensitivities_of_the_bearing_loads(build, path, joints):
     """d/dp of both joints' forces (the tooth force included: an axle's bearing, a rack's
-    guide) against central differences (h 1e-6 relative, rtol 1e-12): within 1e-6 of the
-    largest derivative."""
+    guide) and of the tooth force itself against central differences (h 1e-6 relative,
+    rtol 1e-12): within 1e-6 of the largest derivative."""
     from cmm_dae.description.params import param_value
 
     mech = build()
@@ -238,6 +238,11 @@ def test_sensitivities_of_the_bearing_loads(build, path, joints):
         got = s.joint(joint).force[..., 0]
         assert np.max(np.abs(fd)) > 1.0
         assert np.max(np.abs(got - fd)) <= 1e-6 * np.max(np.abs(fd))
+    name = next(iter(mech.gears))
+    fd = (runs[0].gear(name).force - runs[1].gear(name).force) / (2 * h)
+    got = s.gear(name).force[..., 0]
+    assert np.max(np.abs(fd)) > 1.0
+    assert np.max(np.abs(got - fd)) <= 1e-6 * np.max(np.abs(fd))
 
 
 def test_animation_draws_the_pitch_circles():

@@ -153,7 +153,7 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
     """The joint, gear, driver and lock rows, with the redundant ones ``drop`` left out:
     returns the joint coordinates ``c``, the rows ``phi`` and ``free`` (1 on an
     inactive lock row). Sets ``mdl.rows``, ``all_rows``, ``jidx``, ``dropped``,
-    ``base_fn``, ``n_base``, ``m`` and ``n_fixed``."""
+    ``base_fn``, ``base_sym``, ``n_base``, ``m`` and ``n_fixed``."""
     mech, smech = mdl.mech, mdl.smech
     q, t, p = fr.q, fr.t, fr.p
     angle, point = fr.angle, fr.point
@@ -203,6 +203,8 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
     if any(not 0 <= i < n_base for i in mdl.dropped):
         raise ValueError(f"only joint and driver rows can be dropped, got {drop}")
     base = ca.jacobian(ca.vertcat(*rows[:n_base]) if n_base else ca.SX(0, 1), q)
+    #: the Jacobian of every joint, gear and driver row, theta symbolic (equations.outputs)
+    mdl.base_sym = base
     if mdl.theta_paths:
         base = ca.substitute(base, mdl.theta, ca.DM(mdl.theta0))
     mdl.base_fn = ca.Function("base", [q, t], [ca.densify(base)])

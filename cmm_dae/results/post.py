@@ -10,24 +10,19 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import Status
-from ..description.mechanism import GROUND
+from ..equations import outputs
 from ..equations.kkt import batch as batch_kkt
 from ..equations.model import Model
 from ..equations.reaction import level
-from .gears import tooth_forces
 from .result import Configuration, Event, Result, Stats
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,
-                        Phi_q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Multipliers and Jacobian over every row (the dropped redundant ones included): the
-    generalized force of the joint and driver rows, ``Phi_q^T lambda``, is what the
-    equations determine; among the multipliers of all those rows that give it, the one of
-    minimum norm (a redundant set's reactions are not determined by rigid-body mechanics)."""
+                        Phi_q: np.ndarray) -> np.ndarray:
+    """Multipliers over every row (the dropped redundant ones included): the generalized
+    force of the joint and driver rows, ``Phi_q^T lambda``, is what the equations
+    determine; among the multipliers of all those rows that give it, the one of minimum
+    norm (a redundant set's reactions are not determined by rigid-body mechanics)."""
     n, nb = t.size, model.n_base
     B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
         1, 0, 2)
@@ -36,8 +31,7 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
     # rcond: the redundant directions are zero only to round-off; cut them, not the small
     # but real singular values near a singular position
     lam_base = np.einsum("nrk,nk->nr", np.linalg.pinv(B.transpose(0, 2, 1), rcond=1e-10), G)
-    return (np.concatenate([lam_base, lam[:, nkeep:]], axis=1),
-            np.concatenate([B, Phi_q[:, nkeep:, :]], axis=1))
+    return np.concatenate([lam_base, lam[:, nkeep:]], axis=1)
 
 
 #: most samples post-processed at a time (bounds the memory of the per-sample matrices)
@@ -58,8 +52,8 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     """The per-sample series of one chunk of samples (see :func:`build_result`)."""
     n = t.size
     a, lam, Phi_q = batch_kkt(model, t, q, v, P)
-    c, cd, cdd, pts = (np.asarray(x).reshape(-1, n) for x in
-                       model.mapped("post_fn", n)(q.T, v.T, a.T, t))
+    c, cd, cdd, _ = (np.asarray(x).reshape(-1, n) for x in
+                     model.mapped("post_fn", n)(q.T, v.T, a.T, t))
     extras = [np.asarray(x).reshape(-1, n).T
               for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
     phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
@@ -69,31 +63,17 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
 
     if model.dropped:  # redundant rows: the reactions shared out at minimum norm
-        lam, Phi_q = _min_norm_reactions(model, t, q, lam, Phi_q)
-    mech = model.mech
-
+        lam = _min_norm_reactions(model, t, q, lam, Phi_q)
+    # the joints' forces and moments, the teeth's, the drivers' efforts (equations.outputs)
+    outputs.function(model)  # (model.outputs_fn, built on first use)
+    jforce, jtorque, gforce, effort = (
+        np.asarray(x).reshape(-1, n).T
+        for x in model.mapped("outputs_fn", n)(q.T, P.T, lam.T))
     nj = len(model.joint_names)
-    pts = pts.reshape(2, n, nj).transpose(1, 2, 0)
-    jforce = np.zeros((n, nj, 2))
-    jtorque = np.zeros((n, nj))
-    for k, (name, j) in enumerate(mech.joints.items()):
-        rows = model.all_rows_of("joint", name) + model.all_rows_of("lock", name)
-        G = -np.einsum("nrk,nr->nk", Phi_q[:, rows, :], lam[:, rows])
-        ref = pts[:, k, :]
-        if j.second_body != GROUND:
-            b = model.bidx[j.second_body]
-            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
-            jforce[:, k] = F
-            jtorque[:, k] = Mc - _cross(ref - q[:, 3 * b:3 * b + 2], F)
-        else:  # action = -reaction on the first body
-            b = model.bidx[j.first_body]
-            F, Mc = G[:, 3 * b:3 * b + 2], G[:, 3 * b + 2]
-            jforce[:, k] = -F
-            jtorque[:, k] = -(Mc + _cross(q[:, 3 * b:3 * b + 2] - ref, F))
-    gforce = tooth_forces(model, q, pts, lam, jforce, jtorque)
-    return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T, "jforce": jforce,
-            "gforce": gforce,
-            "jtorque": jtorque, "drift_pos": drift_pos, "drift_vel": drift_vel,
+    return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T,
+            "jforce": jforce.reshape(n, nj, 2), "gforce": gforce.reshape(n, -1, 2),
+            "jtorque": jtorque, "effort": effort, "drift_pos": drift_pos,
+            "drift_vel": drift_vel,
             "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
             "load_value": extras[3], "load_power": extras[4]}
 
@@ -173,6 +153,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
                "c": np.zeros((0, nj)), "cd": np.zeros((0, nj)), "cdd": np.zeros((0, nj)),
                "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
                "gforce": np.zeros((0, len(model.mech.gears), 2)),
+               "effort": np.zeros((0, len(model.driver_names))),
                "drift_pos": np.zeros(0), "drift_vel": np.zeros(0),
                **{k: np.zeros((0, ne)) for k in ("elem_len", "elem_rate", "elem_tension")},
                **{k: np.zeros((0, nld)) for k in ("load_value", "load_power")}}
@@ -196,15 +177,12 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
         stuck = sides == "stick"
         pull = ((sides == "lower") & (lock < 0)) | ((sides == "upper") & (lock > 0))
         friction[:, k] = np.where(s != 0, -fk * s, np.where(stuck | pull, lock, 0.0))
-    effort = np.zeros((n, len(model.driver_names)))
-    for k, name in enumerate(model.driver_names):
-        effort[:, k] = -lam[:, model.all_rows_of("driver", name)[0]]
 
     data = {"t": t, "q": q, "v": v, "a": ser["a"], "lam": lam,
             "config": np.asarray(config, int), "c": ser["c"], "cd": ser["cd"],
             "cdd": ser["cdd"], "jforce": ser["jforce"], "jtorque": ser["jtorque"],
             "gforce": ser["gforce"],
-            "effort": effort, "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
+            "effort": ser["effort"], "drift_pos": ser["drift_pos"], "drift_vel": ser["drift_vel"],
             "friction": friction,
             **{k: ser[k] for k in ("elem_len", "elem_rate", "elem_tension", "load_value",
                                    "load_power")}}

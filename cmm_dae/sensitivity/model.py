@@ -10,9 +10,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..description.mechanism import GROUND
-from ..equations import reaction
-from ..equations.gearing import tooth
+from ..equations import outputs, reaction
 from ..equations.kkt import blocks as kkt_blocks
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
@@ -99,44 +97,13 @@ class Equations:
         self._singular: _Mat | None = None
 
     def _outputs(self, lam) -> ca.SX:
-        """The Result's joint and driver series as one vector (post-processing's
-        definitions: force of the first body on the second at the second's point)."""
-        model = self.model
-        sy = model.sym
-        q = sy["q"]
-        Phi_q = sy["Phi_q"]
-        fx, fy, tq = [], [], []
-        Pts = sy["P"]
-        for k, (name, j) in enumerate(model.mech.joints.items()):
-            rows = model.rows_of("joint", name) + model.rows_of("lock", name)
-            G = -(Phi_q[rows, :].T @ lam[rows]) if rows else ca.SX.zeros(model.nq)
-            ref = Pts[:, k]
-            second = j.second_body != GROUND
-            b = model.bidx[j.second_body if second else j.first_body]
-            F, Mc = G[3 * b:3 * b + 2], G[3 * b + 2]
-            rb = q[3 * b:3 * b + 2]
-            if second:
-                fx.append(F[0])
-                fy.append(F[1])
-                d = ref - rb
-                tq.append(Mc - (d[0] * F[1] - d[1] * F[0]))
-            else:
-                fx.append(-F[0])
-                fy.append(-F[1])
-                d = rb - ref
-                tq.append(-(Mc + (d[0] * F[1] - d[1] * F[0])))
-        # gear pairs: their tooth forces in the axles' bearing loads, as post-processing
-        def angle(body):
-            return q[3 * model.bidx[body] + 2]
-
-        for name in model.mech.gears:
-            _, fixes = tooth(model, name, lam[model.rows_of("gear", name)[0]],
-                             lambda k: (Pts[0, k], Pts[1, k]), angle, ca.if_else, ca.sign)
-            for k, dfx, dfy, dm in fixes:
-                fx[k], fy[k], tq[k] = fx[k] - dfx, fy[k] - dfy, tq[k] - dm
-        eff = [-lam[model.rows_of("driver", n)[0]] for n in model.driver_names]
-        force = ca.vertcat(*[ca.vertcat(x, y) for x, y in zip(fx, fy, strict=True)])
-        return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, *tq, *eff)
+        """The Result's joint and driver series as one vector, as post-processing gives
+        them (:mod:`cmm_dae.equations.outputs`): c, c', c'', joint forces and moments,
+        driver efforts, tooth forces."""
+        sy = self.model.sym
+        lam_all = ca.DM(outputs.kept_to_all(self.model)) @ lam
+        force, torque, teeth, effort = outputs.expressions(self.model, lam_all)
+        return ca.vertcat(sy["c"], sy["cdot"], sy["cddot"], force, torque, effort, teeth)
 
     def singular_function(self) -> _Mat:
         """``g = w . (Phi_q n)`` for a left and right null vector ``w``, ``n`` of the

@@ -298,6 +298,7 @@ class SensitivityPass(CrossingPass):
         model, eq, res = self.model, self.eq, self.res
         n, nq, P = res.t.size, model.nq, self.P
         nj, nd = len(model.joint_names), len(model.driver_names)
+        ng = len(model.mech.gears)
         out = np.zeros((n, eq.n_out, P))
         acc = np.zeros((n, nq, P))
         for i in range(n):
@@ -313,10 +314,11 @@ class SensitivityPass(CrossingPass):
         o = 0
         d = {}
         for key, w in (("c", nj), ("cd", nj), ("cdd", nj), ("jforce", 2 * nj),
-                       ("jtorque", nj), ("effort", nd)):
+                       ("jtorque", nj), ("effort", nd), ("gforce", 2 * ng)):
             d[key] = out[:, o:o + w]
             o += w
         d["jforce"] = d["jforce"].reshape(n, nj, 2, P)
+        d["gforce"] = d["gforce"].reshape(n, ng, 2, P)
         d["q"], d["v"], d["a"] = self.sq, self.sv, acc
         return d
 

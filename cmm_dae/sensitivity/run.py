@@ -72,6 +72,14 @@ class DriverSensitivity:
 
 
 @dataclass(frozen=True)
+class GearSensitivity:
+    """Derivative of a gear pair's tooth force (as ``Result.gear(name).force``),
+    (n, 2, P)."""
+
+    force: np.ndarray
+
+
+@dataclass(frozen=True)
 class BodySensitivity:
     """Derivative of a body frame's pose (x, y, theta), (n, 3, P)."""
 
@@ -117,6 +125,10 @@ class Sensitivities:
     def driver(self, name: str) -> DriverSensitivity:
         """Derivative of the effort of the driver of joint ``name``."""
         return DriverSensitivity(self.data["effort"][:, self._k("drivers", name)])
+
+    def gear(self, name: str) -> GearSensitivity:
+        """Derivative of gear pair ``name``'s tooth force."""
+        return GearSensitivity(self.data["gforce"][:, self._k("gears", name)])
 
     def body(self, name: str) -> BodySensitivity:
         """Derivative of body ``name``'s frame pose (as ``Result.body(name).pose``)."""
@@ -253,6 +265,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
         # the reactions shared out at minimum norm over every row, a choice the pass does
         # not differentiate: their derivatives are not given
         data["jforce"][:], data["jtorque"][:] = np.nan, np.nan
+        data["gforce"][:] = np.nan
         sp.notes.append("redundant constraints (" + ", ".join(res.layout.redundant) +
                         "): the joint forces and torques are minimum-norm reactions; "
                         "their derivatives are not given (NaN)")
