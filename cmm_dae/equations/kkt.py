@@ -31,14 +31,60 @@ from scipy.linalg.lapack import dgbsv, dgesv
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 from scipy.sparse.linalg import splu
 
-__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "batch", "blocks",
-           "impact_map", "matrix", "structure"]
+__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "Symbolic", "batch",
+           "blocks", "impact_map", "matrix", "solve_symbolic", "structure", "symbolic"]
 
 
 def blocks(mass, Phi_q, free):
     """The KKT matrix ``[[M, Phi_q^T], [Phi_q, D]]`` for CasADi expressions (``mass`` the
     diagonal of M, ``free`` that of D: 1 on inactive lock rows)."""
     return ca.blockcat([[ca.diag(mass), Phi_q.T], [Phi_q, ca.diag(free)]])
+
+
+@dataclass(frozen=True)
+class Symbolic:
+    """The KKT system of one state for CasADi symbols, ``A z = b`` (see
+    :func:`symbolic`); :meth:`unpack` gives the accelerations and multipliers from z."""
+
+    A: Any
+    b: Any
+    Phi_q: Any
+    Qf: Any
+    mass: np.ndarray
+    schur: bool
+
+    def unpack(self, z) -> tuple[Any, Any]:
+        """(q'', lambda) from a solution ``z`` of the system."""
+        if self.schur:
+            return (self.Qf - self.Phi_q.T @ z) / ca.DM(self.mass), z
+        nq = self.mass.size
+        return z[:nq], z[nq:]
+
+    def solve(self) -> tuple[Any, Any]:
+        """(q'', lambda) as expressions, by :func:`solve_symbolic`."""
+        return self.unpack(solve_symbolic(self.A, self.b))
+
+
+def symbolic(model: Any, q, v, t, p, schur: bool = False) -> Symbolic:
+    """The KKT system at (q, v, t) in configuration ``p`` for CasADi symbols: the whole
+    matrix :func:`blocks`, right-hand side ``[Q; gamma]``; or with ``schur`` (every mass
+    positive) the Schur complement ``S = Phi_q M^-1 Phi_q^T - D``, right-hand side
+    ``Phi_q M^-1 Q - gamma``, for the multipliers alone (m x m instead of nq + m)."""
+    Phi_q, Qf, gamma = model.kkt_fn(q, v, t, p)
+    free = model.free_fn(p)
+    if schur:
+        PM = Phi_q @ ca.diag(ca.DM(1.0 / model.mass))
+        return Symbolic(PM @ Phi_q.T - ca.diag(free), PM @ Qf - gamma, Phi_q, Qf,
+                        model.mass, True)
+    return Symbolic(blocks(ca.DM(model.mass), Phi_q, free), ca.vertcat(Qf, gamma), Phi_q,
+                    Qf, model.mass, False)
+
+
+def solve_symbolic(A, b):
+    """``A^-1 b`` in a CasADi graph, by QR: no pivoting order fixed when the graph is built
+    (an LU's would be chosen for the values of the first call), and defined for every
+    nonsingular A the graph meets."""
+    return ca.solve(A, b, "qr")
 
 
 #: Size of the KKT matrix (coordinates plus constraint rows) from which :meth:`Solver.solve`

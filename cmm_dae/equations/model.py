@@ -391,8 +391,8 @@ class Model:
     def kkt_system(self, q, v, t, p) -> tuple[ca.MX | ca.SX, ca.MX | ca.SX]:
         """The KKT matrix and right-hand side of :meth:`kkt` for CasADi symbols (for the
         compiled event functions and iterative step)."""
-        Phi_q, Qf, gamma = self.kkt_fn(q, v, t, p)
-        return kkt.blocks(ca.DM(self.mass), Phi_q, self.free_fn(p)), ca.vertcat(Qf, gamma)
+        system = kkt.symbolic(self, q, v, t, p)
+        return system.A, system.b
 
     def kkt_matrix(self, Phi_q: np.ndarray, p: np.ndarray) -> np.ndarray:
         """The numeric KKT matrix at Phi_q in configuration ``p``."""

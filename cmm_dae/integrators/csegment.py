@@ -29,6 +29,7 @@ import sksundae  # loads the SUNDIALS libraries into the process before the driv
 from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.progress import Bar
+from ..equations import kkt
 from ..equations.codegen import build_library, c_compiler, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -176,10 +177,9 @@ class CompiledModel:
 
     def _exact(self, hs: ev.HybridState, triggers: list[ev.Trigger]) -> ca.Function:
         model = self.model
-        nq, m = model.nq, model.m
         t, y, p = ca.MX.sym("t"), ca.MX.sym("y", model.ida.N), ca.MX.sym("p", model.n_params)
         q, v, _ = model.ida.symbolic(y)
-        lam = ca.solve(*model.kkt_system(q, v, t, p), "qr")[nq:nq + m]
+        _, lam = kkt.symbolic(model, q, v, t, p).solve()
         c, cd = model.cvel_fn(q, v)
         vals: list = [None] * len(triggers)
         ev.event_values(hs, c, cd, lam, triggers, vals, where=ca.if_else)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Stats
-from ..equations import rank
+from ..equations import kkt, rank
 from ..equations.codegen import Buffered
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -131,16 +131,12 @@ class _CompiledStep:
         vel = ca.Function("vel", [q, tn, p, tar, rates], [
             ca.mmax(ca.fabs(G(q, tn, p, tar))), ca.vertcat(rows(Phi_q, act), rows(c_q, kidx)),
             ca.vertcat(-rows(Phi_t, act), rates)])
-        Phi_k, Qf, gamma = model.kkt_fn(q, v, tn, p)
-        if schur:  # the Schur complement on the diagonal mass matrix (as the outputs)
-            PM = Phi_k @ ca.diag(ca.DM(1.0 / model.mass))
-            kkt = ca.Function("kkt", [q, v, tn, p], [
-                PM @ Phi_k.T - ca.diag(model.free_fn(p)), PM @ Qf - gamma])
-        else:  # point masses: the whole KKT matrix
-            kkt = ca.Function("kkt", [q, v, tn, p], [*model.kkt_system(q, v, tn, p)])
-        sol = S("sol", m if schur else nq + m)
-        lam = sol if schur else sol[nq:nq + m]
-        acc = (Qf - Phi_k.T @ sol) / ca.DM(model.mass) if schur else sol[:nq]
+        # the Schur complement on the diagonal mass matrix (as the outputs) or, with point
+        # masses, the whole KKT matrix
+        system = kkt.symbolic(model, q, v, tn, p, schur=schur)
+        kkt_fn = ca.Function("kkt", [q, v, tn, p], [system.A, system.b])
+        sol = S("sol", system.b.numel())
+        acc, lam = system.unpack(sol)
         c1, cd1 = model.cvel_fn(q, v)
         vals: list = [None] * len(triggers)
         ev.event_values(hs, c1, cd1, lam, triggers, vals, where=ca.if_else)
@@ -155,9 +151,9 @@ class _CompiledStep:
         q0, targets, rates = pre(q, v, a, t, tn)
         q1 = newton(q0, tn, p, targets)
         r, J, rhs = vel(q1, tn, p, targets, rates)
-        v1 = ca.solve(J, rhs, "qr")
-        A, b = kkt(q1, v1, tn, p)
-        acc, values = fin(q1, v1, tn, p, ca.solve(A, b, "qr"))
+        v1 = kkt.solve_symbolic(J, rhs)
+        A, b = kkt_fn(q1, v1, tn, p)
+        acc, values = fin(q1, v1, tn, p, kkt.solve_symbolic(A, b))
         self.fn = Buffered(ca.Function("step", [q, v, a, t, tn, p], [q1, v1, acc, r, values]))
 
     def __call__(self, q, v, a, t, tn, p):
