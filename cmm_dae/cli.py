@@ -10,6 +10,7 @@ run failed part-way), never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from .cli_commands import (
@@ -230,8 +231,6 @@ def main(argv: list[str] | None = None) -> int:
 def _quiet_stdout() -> None:
     """Point stdout at /dev/null so that the interpreter's final flush into a closed pipe
     says nothing either."""
-    import os
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

@@ -88,6 +88,35 @@ def test_no_import_hidden_in_a_function():
     assert not bad
 
 
+#: what a function may import itself: the optional extras (a user without them gets the
+#: rest of the package), matplotlib where a report picks its backend first
+LATE = {"pandas", "mujoco", "distributed", "matplotlib", "importlib"}
+
+
+def test_only_optional_libraries_are_imported_late():
+    """Outside the command line, a function imports only the optional extras or
+    matplotlib (backend first); every other library at the top of its module, where a
+    missing dependency fails the import at once instead of halfway through a run."""
+    bad = []
+    for f, parts in _modules():
+        if parts[0] in TOP and parts[0] != "__init__":
+            continue
+        tree = ast.parse(f.read_text())
+        for fn in ast.walk(tree):
+            if not isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and not node.level:
+                    names = [node.module or ""]
+                else:
+                    continue
+                bad += [f"{f.relative_to(PKG)}:{node.lineno} {n}" for n in names
+                        if n.split(".")[0] not in LATE]
+    assert not bad, bad
+
+
 def test_the_old_flat_paths_still_import_with_a_warning():
     import importlib
     import sys

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from ..core.errors import Problem
 
 GROUND = "ground"
@@ -105,8 +107,6 @@ def _friction_problems(t: str, j) -> list[Problem]:
 def _spline_problems(t: str, j) -> list[Problem]:
     """A spline curve: at least 4 points, counter-clockwise once around its origin, none
     at it; for a unilateral contact (its gap is radial)."""
-    import numpy as np
-
     c = j.curve
     if not j.unilateral:
         return [Problem(t, "curve", "a spline curve is for a unilateral contact (a cam and "

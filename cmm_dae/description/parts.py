@@ -7,6 +7,8 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 __all__ = ["Curve", "Damper", "Friction", "Gear", "Limits", "Spring"]
 
 Vec2 = tuple[float, float]
@@ -92,8 +94,6 @@ class Curve:
     def polar(self) -> tuple:
         """A spline's knots: polar angles (increasing, from the first point's, spanning one
         turn; the first repeated a turn later) and radii (m)."""
-        import numpy as np
-
         pts = np.asarray(self.points, float)
         ang = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
         rad = np.hypot(pts[:, 0], pts[:, 1])

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND
@@ -55,8 +56,6 @@ def _spline_radius(c, phi):
     """The periodic cubic spline through a spline curve's knots at the polar angle
     ``phi`` (CasADi), piece by piece: the angle is brought into the knots' turn first
     (the spline is C2 across the turn's ends, so the jump of the angle does not show)."""
-    from scipy.interpolate import CubicSpline
-
     ang, rad = c.polar()
     spl = CubicSpline(ang, rad, bc_type="periodic")
     x = ang[0] + ca.fmod(ca.fmod(phi - ang[0], 2 * math.pi) + 2 * math.pi, 2 * math.pi)

@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from ..description.mechanism import GROUND
@@ -96,6 +97,4 @@ def _cos_sin(th: Any) -> tuple:
     """cos and sin of a number, a numpy array or a CasADi expression."""
     if isinstance(th, float | int | np.ndarray):
         return np.cos(th), np.sin(th)
-    import casadi as ca
-
     return ca.cos(th), ca.sin(th)

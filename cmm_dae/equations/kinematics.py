@@ -8,7 +8,7 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
-from scipy.linalg import solve_triangular
+from scipy.linalg import qr, solve_triangular
 
 from . import kkt, rank
 from .build import Constraints
@@ -278,8 +278,6 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
     of each other: one joint per body): IDA integrates those bodies by their angle, which
     needs both rows of the pin. The dependent rows are then picked among the others,
     projected on what the pins leave free; their number is the whole set's rank deficit."""
-    from scipy.linalg import qr
-
     A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
     if A.shape[0] == 0:
         return ()

@@ -11,6 +11,9 @@ frame.
 
 from __future__ import annotations
 
+import base64
+import io
+import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +23,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from PIL import Image  # noqa: E402  (matplotlib's own dependency)
 
 from ..core.errors import CmmError  # noqa: E402
 from ..equations.gearing import pinion_radius, pitch_radius  # noqa: E402
@@ -288,8 +292,6 @@ def animate(res: Result, path: str | Path, *, fps: int = 20,
     -------
     Path
     """
-    from PIL import Image
-
     if not (isinstance(fps, int) and fps >= 1):
         raise CmmError(f"fps: expected a whole number >= 1 of frames per second, got {fps!r}")
     path = gif_path(path)
@@ -304,12 +306,6 @@ def html_animation(res: Result, *, fps: int = 20, max_frames: int = DEFAULT_FRAM
                    dpi: int = 80) -> str:
     """An interactive player (play/pause, step, a time slider) as a self-contained HTML
     fragment, the frames embedded as PNG images; no network access needed to view it."""
-    import base64
-    import io
-    import json
-
-    from PIL import Image
-
     urls = []
     for f in _frames(res, max_frames, dpi):
         buf = io.BytesIO()

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.integrate import cumulative_simpson
 
 
 @dataclass(frozen=True)
@@ -33,8 +34,6 @@ class Energy:
 
 def _cumulative(t: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Cumulative integral of samples f(t), Simpson between repeated (event) times."""
-    from scipy.integrate import cumulative_simpson
-
     out = np.zeros(t.size)
     cuts = [0] + [k + 1 for k in range(t.size - 1) if t[k + 1] == t[k]] + [t.size]
     base = 0.0

@@ -4,6 +4,7 @@ ends in a :class:`CmmError` that names the file."""
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +22,6 @@ def load_result(path: str | Path) -> Result:
         The file is missing, not a saved Result, truncated or corrupted (named, with what
         was wrong).
     """
-    import zipfile
-
     path = Path(path)
     try:
         with path.open("rb") as f:

@@ -17,6 +17,7 @@ import math
 import time
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from ..core.errors import AssemblyError, CmmError, SolverError, Status
 from ..core.progress import Bar
@@ -47,8 +48,6 @@ def _one_blas_thread():
     """A context with one BLAS thread: the package's systems are small, and on a busy
     2-core machine OpenBLAS's default threads turned a 0.47 s run into 5.3 s."""
     global _BLAS
-    from threadpoolctl import ThreadpoolController
-
     if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once
         _BLAS = ThreadpoolController()
     return _BLAS.limit(limits=1, user_api="blas")

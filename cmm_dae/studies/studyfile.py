@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +42,6 @@ def design_spec(path: str | Path) -> dict[str, Any]:
     ModelError
         The file cannot be read, or a key is missing or wrong (file, table and key named).
     """
-    import tomllib
-
 
     path = Path(path)
     src = str(path)
