@@ -213,6 +213,12 @@ def _bench(args: argparse.Namespace) -> int:
         print(peers_table([compare_a02(n, repeat=args.repeat) for n in args.loops]))
         print()
         print(andrews_table([compare_andrews(h, repeat=args.repeat) for h in args.steps]))
+        from .studies.peers_exudyn import compare_a02_exudyn, exudyn_available, exudyn_table
+
+        print()
+        print(exudyn_table([compare_a02_exudyn(n, repeat=args.repeat) for n in args.loops])
+              if exudyn_available() else
+              "Exudyn is not installed (pip install 'cmm_dae[peers]'): no comparison with it")
         return 0
     paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,

@@ -90,7 +90,7 @@ def test_no_import_hidden_in_a_function():
 
 #: what a function may import itself: the optional extras (a user without them gets the
 #: rest of the package), matplotlib where a report picks its backend first
-LATE = {"pandas", "mujoco", "distributed", "matplotlib", "importlib"}
+LATE = {"pandas", "mujoco", "exudyn", "distributed", "matplotlib", "importlib"}
 
 
 def test_only_optional_libraries_are_imported_late():

@@ -11,7 +11,7 @@ import pytest
 import cmm_dae as cd
 from cmm_dae.cli import main
 from cmm_dae.description import iftomm
-from cmm_dae.studies import peers
+from cmm_dae.studies import peers, peers_exudyn
 
 
 def test_mujoco_model_is_the_a02_mechanism():
@@ -21,7 +21,7 @@ def test_mujoco_model_is_the_a02_mechanism():
     t, tip = peers.a02_mujoco(2, 0.2, h=1e-4)
     assert np.allclose(tip[0], [0.0, 1.0], atol=1e-12)
     assert abs((tip[1, 0] - tip[0, 0]) / 1e-4 - 1.0) <= 1e-3
-    assert peers._error(t, tip, 2) <= 2e-4
+    assert peers.error_a02(t, tip, 2) <= 2e-4
 
 
 def test_compare_picks_the_cheapest_tolerance_reaching_mujocos_error():
@@ -34,7 +34,7 @@ def test_compare_picks_the_cheapest_tolerance_reaching_mujocos_error():
     k = peers.RTOLS.index(row["rtol"])
     if k:
         res = cd.run_dae(iftomm.a02_four_bar(1), 0.5, rtol=peers.RTOLS[k - 1], throw=False)
-        assert not res.success or peers._error(res.t, iftomm.crank_tip(res), 1) \
+        assert not res.success or peers.error_a02(res.t, iftomm.crank_tip(res), 1) \
             > row["mujoco_error"]
     assert math.isclose(row["ratio"], row["cmm_dae_s"] / row["mujoco_s"])
     # both times are reported (compared only in the benchmark: a test never times)
@@ -47,6 +47,7 @@ def test_cli_peers(capsys):
     assert main(["bench", "--peers", "--loops", "1", "--repeat", "1", "--steps", "1e-5"]) == 0
     out = capsys.readouterr().out
     assert "A02 four-bar chain" in out and "MuJoCo" in out and "Andrews' squeezer" in out
+    assert "against Exudyn" in out
     assert main(["bench", "--peers", "--loops", "0"]) == 2
     assert "--loops must be integers >= 1" in capsys.readouterr().err
     assert main(["bench", "--peers", "--steps", "0.1"]) == 2
@@ -89,3 +90,34 @@ def test_compare_andrews_picks_the_cheapest_tolerance_reaching_mujocos_error():
                                           for j in ANDREWS_003}) > row["mujoco_error"]
     assert math.isclose(row["ratio"], row["cmm_dae_s"] / row["mujoco_s"])
     assert "Andrews' squeezer" in andrews_table([row])
+
+
+def test_exudyn_model_is_the_a02_mechanism():
+    """Exudyn's model starts on A02's parallelogram (the tip at (0, 1) m) and its error
+    against the reference falls as h^2 (generalized-alpha, second order): 2.9e-3 m at
+    h 1e-2, 100 times less at 1e-3 (ratio within 90-110), over 2 s with 2 loops."""
+    errs = []
+    for h in (1e-2, 1e-3):
+        t, tip = peers_exudyn.a02_exudyn(2, 2.0, h)
+        assert np.allclose(tip[0], [0.0, 1.0], atol=1e-12)
+        assert t[-1] == pytest.approx(2.0, abs=1e-12)
+        errs.append(peers.error_a02(t, tip, 2))
+    assert 2e-3 <= errs[0] <= 4e-3
+    assert 90.0 <= errs[0] / errs[1] <= 110.0
+
+
+def test_compare_with_exudyn_picks_the_cheapest_tolerance():
+    """The Exudyn row: cmm_dae's chosen rtol reaches Exudyn's error at h 1e-2; the table
+    names Exudyn; without Exudyn the error says how to get it."""
+    row = peers_exudyn.compare_a02_exudyn(1, t_end=0.5, repeat=1)
+    assert row["exudyn_error"] > 0 and row["rtol"] in peers.RTOLS
+    assert row["cmm_dae_error"] <= row["exudyn_error"]
+    assert math.isclose(row["ratio"], row["cmm_dae_s"] / row["exudyn_s"])
+    assert "Exudyn err" in peers_exudyn.exudyn_table([row])
+
+
+def test_without_exudyn_the_error_says_how_to_get_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "exudyn", None)
+    assert not peers_exudyn.exudyn_available()
+    with pytest.raises(cd.CmmError, match=r"pip install 'cmm_dae\[peers\]'"):
+        peers_exudyn.a02_exudyn(1, 0.1)

@@ -31,7 +31,7 @@ from ..simulation.runner import run_dae
 from .bench import best_time
 
 __all__ = ["COLUMNS", "RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "columns", "compare_a02",
-           "mujoco_available", "peers_table"]
+           "error_a02", "header", "mujoco_available", "peers_table"]
 
 #: The tolerances cmm_dae tries, loosest first (atol = 1e-2 rtol as in any run).
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
@@ -117,20 +117,29 @@ RATIO_NOTE = ("time ratio: cmm_dae's wall time over MuJoCo's (RK4, loops closed 
               "constraints of time constant 2 h), best of warm runs side by side")
 
 
-#: The columns both comparisons share, and one row's values in them.
-COLUMNS = (f"{'MuJoCo h':>8}  {'MuJoCo err':>10}  {'cmm_dae rtol':>12}  {'cmm_dae err':>11}  "
-           f"{'time ratio':>10}")
+def header(peer: str = "MuJoCo") -> str:
+    """The columns every comparison shares, against ``peer``: its step and error,
+    cmm_dae's tolerance and error, the time ratio."""
+    return (f"{peer + ' h':>8}  {peer + ' err':>10}  {'cmm_dae rtol':>12}  "
+            f"{'cmm_dae err':>11}  {'time ratio':>10}")
 
 
-def columns(row: dict) -> str:
-    """A comparison row's MuJoCo step and error, cmm_dae's tolerance ("none" where none
-    reached MuJoCo's error) and error, and the time ratio, under :data:`COLUMNS`."""
+#: The columns of the comparisons with MuJoCo (:func:`header`).
+COLUMNS = header()
+
+
+def columns(row: dict, peer: str = "mujoco") -> str:
+    """A comparison row's peer step and error (``row[peer + "_error"]``), cmm_dae's
+    tolerance ("none" where none reached the peer's error) and error, and the time ratio,
+    under :func:`header`."""
     rtol = f"{row['rtol']:.0e}" if row["rtol"] is not None else "none"
-    return (f"{row['h']:>8.0e}  {row['mujoco_error']:>10.2e}  {rtol:>12}  "
+    return (f"{row['h']:>8.0e}  {row[peer + '_error']:>10.2e}  {rtol:>12}  "
             f"{row['cmm_dae_error']:>11.2e}  {row['ratio']:>10.2f}")
 
 
-def _error(t: np.ndarray, tip: np.ndarray, n: int) -> float:
+def error_a02(t: np.ndarray, tip: np.ndarray, n: int) -> float:
+    """The largest distance (m) of A02's first crank tip ``tip`` (len(t), 2) from the
+    reference at the times ``t`` (s), ``n`` loops."""
     return float(np.max(np.linalg.norm(tip - iftomm.a02_reference(n, t), axis=1)))
 
 
@@ -149,11 +158,11 @@ def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
     """
     mech = iftomm.a02_four_bar(n)
     t_mj, tip_mj = a02_mujoco(n, t_end, h)
-    err_mj = _error(t_mj, tip_mj, n)
+    err_mj = error_a02(t_mj, tip_mj, n)
 
     def error_at(rtol: float) -> float | None:
         res = run_dae(mech, t_end, rtol=rtol, throw=False)
-        return _error(res.t, iftomm.crank_tip(res), n) if res.success else None
+        return error_a02(res.t, iftomm.crank_tip(res), n) if res.success else None
 
     chosen, err = cheapest(error_at, err_mj, rtols)
     row = {"loops": n, "h": h, "mujoco_error": err_mj, "rtol": chosen,
