@@ -31,6 +31,17 @@ from .cli_commands import (
 from .core.errors import CmmError, SolverError
 
 
+def _compiled_flags(parser: argparse.ArgumentParser) -> None:
+    """--compiled / --no-compiled (one of them); neither: "auto" (C where the build is
+    cached)."""
+    p = parser.add_mutually_exclusive_group()
+    p.add_argument("--compiled", dest="compiled", action="store_const", const=True,
+                   default="auto", help="run IDA's segments in C, built now if need be "
+                   "(needs a C compiler; cached); default: in C where built already")
+    p.add_argument("--no-compiled", dest="compiled", action="store_const", const=False,
+                   help="run IDA's segments in Python")
+
+
 def _branch(text: str) -> str | tuple[str, int]:
     """``--branch``: "continue" or JOINT:SIGN with SIGN +1, -1, + or -."""
     if text == "continue":
@@ -75,10 +86,10 @@ def _simulating(sub) -> None:
     r.add_argument("--csv", help="write every series to this CSV file")
     r.add_argument("--save", help="save the Result to this .npz file")
     r.add_argument("--force", action="store_true", help="overwrite --csv / --save files")
-    r.add_argument("--compiled", action="store_true",
-                   help="run IDA's segments in C (needs a C compiler; built once, cached)")
+    _compiled_flags(r)
     r.add_argument("--linsolver", choices=("auto", "dense", "sparse"), default="auto",
-                   help="IDA's linear solver (auto: sparse from 300 unknowns)")
+                   help="IDA's linear solver (auto: sparse from 120 unknowns where at most "
+                        "5%% of the Jacobian is nonzero)")
     r.add_argument("--branch", type=_branch, default="continue", metavar="JOINT:SIGN",
                    help="at singular positions take the branch on which JOINT moves with "
                         "SIGN (+1 or -1), e.g. G1:+1 (default: continue, the branch of the "
@@ -143,8 +154,7 @@ def _studies(sub) -> None:
     sw.add_argument("--workers", type=_positive_int, default=None,
                     help="local processes (all cores)")
     sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
-    sw.add_argument("--compiled", action="store_true",
-                    help="run IDA's segments in C (needs a C compiler; built once, cached)")
+    _compiled_flags(sw)
     sw.set_defaults(func=_sweep)
 
     se = sub.add_parser("sensitivities", help="d(event times)/d(parameters), exact through "

@@ -17,6 +17,8 @@ from cmm_dae.core.errors import SolverError, Status
 from cmm_dae.integrators import csegment
 
 pytestmark = pytest.mark.skipif(csegment.c_compiler() is None, reason="needs a C compiler")
+#: the module shares one build cache (the fixture below), not one per test (conftest)
+SHARED_CACHE = True
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -165,3 +167,71 @@ def test_another_scikit_sundae_falls_back_with_one_warning(monkeypatch):
     assert sum("scikit-sundae 9.0.0" in str(w.message) for w in caught) == 1
     ref = cd.run_dae(mech, 0.5)
     assert np.array_equal(res.joint("O").position, ref.joint("O").position)
+
+
+def test_auto_runs_compiled_where_the_build_is_cached(monkeypatch, tmp_path):
+    """compiled="auto" (the default): the Python path while the mechanism's build is not
+    in the cache (no library written by that run), the compiled segment once it is; the
+    same events and samples to 1e-9 s and the same crank torque to 1e-9 N m either way."""
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    csegment.clear()
+    mech = cd.load(cd.example("double_folded"))
+    first = cd.run_dae(mech, 10.0)
+    assert first.meta["compiled"] is False
+    assert not list(tmp_path.glob("cmm_[!s]*.so"))  # only the driver, if any
+    assert cd.run_dae(mech, 10.0, compiled=True).meta["compiled"] is True
+    csegment.clear()  # a new process: found in the cache
+    again = cd.run_dae(cd.load(cd.example("double_folded")), 10.0)
+    assert again.meta["compiled"] is True
+    _same(first, again, {"effort": (first.driver("A").effort, again.driver("A").effort)})
+    assert cd.run_dae(mech, 1.0, compiled=False).meta["compiled"] is False
+
+
+def test_auto_builds_after_a_long_run_and_says_so_once(monkeypatch, tmp_path):
+    """A run under "auto" that took longer than the threshold (here 0 s) builds the
+    segment in the background and says so once per process (CompileNotice); the next
+    run of the mechanism is compiled. A run shorter than the threshold builds nothing."""
+    import warnings
+
+    from cmm_dae.core.errors import CompileNotice
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    csegment.clear()
+    mech = cd.load(cd.example("pendulum_stop"))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        cd.run_dae(mech, 0.5)  # 2 s and twice the estimate: far above this run
+    assert not seen
+    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 0.0)
+    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.0)
+    monkeypatch.setattr(csegment, "_noticed", False)
+    with pytest.warns(CompileNotice, match="in the background"):
+        assert cd.run_dae(mech, 0.5).meta["compiled"] is False
+    csegment.clear()  # waits for the build
+    assert cd.run_dae(mech, 0.5).meta["compiled"] is True
+    other = cd.load(cd.example("slider_crank"))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        cd.run_dae(other, 0.2)
+    assert not [w for w in seen if issubclass(w.category, CompileNotice)]
+    csegment.clear()
+    assert cd.run_dae(other, 0.2).meta["compiled"] is True
+
+
+def test_auto_without_a_compiler_is_quiet(monkeypatch, tmp_path):
+    """No compiler: "auto" runs the Python path with no warning and builds nothing;
+    an unknown value of compiled is refused by name."""
+    import warnings
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    monkeypatch.setattr(csegment, "c_compiler", lambda: None)
+    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 0.0)
+    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.0)
+    csegment.clear()
+    mech = cd.load(cd.example("pendulum_stop"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cd.run_dae(mech, 0.5).meta["compiled"] is False
+    assert not list(tmp_path.glob("cmm_[!s]*.so"))
+    with pytest.raises(cd.ModelError, match="compiled: expected True, False or 'auto'"):
+        cd.run_dae(mech, 0.5, compiled="yes")

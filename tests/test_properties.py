@@ -134,9 +134,11 @@ def test_both_integrators_same_event_sequence(p):
     # differ between a located event and a step-end check: skip those examples
     assume(all(abs(e.velocity_before) > 0.05 or e.kind == "release" for e in a.events))
     # near misses likewise: the explicit scheme gains a little energy and may touch a stop
-    # that the exact motion turns back from just before
-    if not a.events:
-        assume(np.min(p["upper"] - a.joint("E").position) > 2e-3)
+    # that the exact motion turns back from just before (any approach that is not an
+    # event: a turning point off the stop, within 2 mm of it)
+    gap = p["upper"] - a.joint("E").position
+    turn = np.flatnonzero((gap[1:-1] < gap[:-2]) & (gap[1:-1] < gap[2:])) + 1
+    assume(not np.any((gap[turn] > 1e-9) & (gap[turn] < 2e-3)))
     b = cd.run_iterative(mech, 0.5, dt=5e-4, output_every=20)
     assert [(e.kind, e.joint) for e in a.events] == [(e.kind, e.joint) for e in b.events]
     for ea, eb in zip(a.events, b.events, strict=True):

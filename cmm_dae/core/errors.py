@@ -15,6 +15,11 @@ class CmmError(Exception):
     """Base class of every error raised by cmm_dae."""
 
 
+class CompileNotice(UserWarning):
+    """Said once per process when ``compiled="auto"`` builds a mechanism's compiled
+    segment in the background (filter it by this class to keep a script quiet)."""
+
+
 class Status(StrEnum):
     """How a run ended. The value is a short tag (``Result.status``); the full sentence of
     the run is ``Result.message``; :data:`STATUS_MESSAGES` explains each code."""

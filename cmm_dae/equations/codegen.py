@@ -8,6 +8,7 @@ import os
 import shlex
 import shutil
 import subprocess
+import threading
 import warnings
 from pathlib import Path
 
@@ -111,21 +112,28 @@ def verified(lib: Path, key: str) -> bool:
         return False
 
 
+class NotBuiltError(LookupError):
+    """A library asked for with ``build=False`` is not in the cache (or fails its check)."""
+
+
 def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function] = (),
-                  flags: tuple[str, ...] = ()) -> Path:
+                  flags: tuple[str, ...] = (), build: bool = True) -> Path:
     """A shared library ``cmm_<key>.so`` in :func:`cache_dir` built (unless a verified one
     is already there, see :func:`verified`) from C ``sources`` and the CasADi-generated C
     of ``funcs``; ``flags`` go to the linker. A cached file that fails the check is
     rebuilt with a one-line warning. Raises OSError / subprocess.SubprocessError /
-    RuntimeError when it cannot be built."""
+    RuntimeError when it cannot be built, :class:`NotBuiltError` with ``build=False`` when it
+    is not built already."""
+    cache = cache_dir()
+    lib = cache / f"cmm_{key}.so"
+    if lib.is_file() and verified(lib, key):
+        return lib
+    if not build:
+        raise NotBuiltError(str(lib))
     cc = c_compiler()
     if cc is None:
         raise OSError("no C compiler found (set CC or install cc/gcc)")
-    cache = cache_dir()
-    lib = cache / f"cmm_{key}.so"
     if lib.is_file():
-        if verified(lib, key):
-            return lib
         warnings.warn(f"the cached library {lib} is incomplete, changed or not this "
                       "model's (no matching size and checksum): rebuilding it", stacklevel=3)
     cache.mkdir(parents=True, exist_ok=True)
@@ -135,13 +143,13 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
         # named by the process as the library's temporary file is: two processes building
         # the same library (parallel test workers, a sweep's workers) must not compile a
         # C file the other is still writing
-        gen = ca.CodeGenerator(f"cmm_{key}_{os.getpid()}.c")
+        gen = ca.CodeGenerator(f"cmm_{key}_{_builder()}.c")
         for f in funcs:
             gen.add(f)
         generated = Path(gen.generate(str(cache) + os.sep))
         files.append(str(generated))
-    tmp = lib.with_suffix(f".{os.getpid()}.tmp")
-    stamp_tmp = lib.with_suffix(f".{os.getpid()}.ok.tmp")
+    tmp = lib.with_suffix(f".{_builder()}.tmp")
+    stamp_tmp = lib.with_suffix(f".{_builder()}.ok.tmp")
     try:
         subprocess.run([*cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
                        check=True, capture_output=True, timeout=600)
@@ -156,6 +164,12 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
         tmp.unlink(missing_ok=True)
         stamp_tmp.unlink(missing_ok=True)
     return lib
+
+
+def _builder() -> str:
+    """Names a build's temporary files: its process and thread (a background build and a
+    run's own may build at once)."""
+    return f"{os.getpid()}_{threading.get_ident()}"
 
 
 def function_key(funcs: list[ca.Function]) -> str:

@@ -40,8 +40,9 @@ class RunOptions:
     progress: Bar | None = None
     #: branch at a singular position: None (the branch of the motion) or (joint, +1 / -1)
     branch: tuple[str, int] | None = None
-    #: IDA: run each segment in C (:mod:`cmm_dae.integrators.csegment`) where a compiler is present
-    compiled: bool = False
+    #: IDA: run each segment in C (:mod:`cmm_dae.integrators.csegment`): True, False or
+    #: "auto" (where it is built already; :func:`~cmm_dae.integrators.csegment.choose`)
+    compiled: bool | str = False
     #: IDA's linear solver: "dense", "sparse" (SuperLU_MT on CasADi's pattern) or "auto"
     linsolver: str = "auto"
 
@@ -210,3 +211,7 @@ class Integrator(ABC):
 
     def after_events(self, transitions: list[Transition]) -> None:  # noqa: B027
         """Told what the policy did at the last stop (default: nothing to adjust)."""
+
+    def after_run(self, seconds: float) -> None:  # noqa: B027
+        """Told that the run is over and how long it took (s, wall time; default:
+        nothing to do; IDA may build its compiled segment for the next runs)."""

@@ -15,9 +15,11 @@ when it cannot, callers warn once and keep the Python path.
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import hashlib
 import subprocess
+import threading
 import warnings
 import weakref
 from dataclasses import dataclass
@@ -28,13 +30,15 @@ import numpy as np
 import sksundae  # loads the SUNDIALS libraries into the process before the driver
 from sksundae._cy_ida import IDAMESSAGES
 
+from ..core.errors import CompileNotice
 from ..core.progress import Bar
 from ..equations import kkt
-from ..equations.codegen import build_library, c_compiler, function_key
+from ..equations.codegen import NotBuiltError, build_library, c_compiler, cache_dir, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
 
-__all__ = ["CHUNK", "CompiledModel", "SegmentRun", "available", "c_compiler", "driver",
+__all__ = ["AUTO_BUILD_AFTER", "CHUNK", "CompiledModel", "SegmentRun", "available",
+           "build_estimate", "build_later", "c_compiler", "choose", "clear", "driver",
            "for_model"]
 
 #: cmm_seg_run's own return values besides IDA's flags
@@ -79,17 +83,18 @@ def check_version(version: str | None = None) -> None:
                       "prototypes); running the Python path")
 
 
-def driver() -> ctypes.CDLL:
+def driver(build: bool = True) -> ctypes.CDLL:
     """The compiled driver, built on first use. Raises OSError (no compiler, no SUNDIALS
     libraries, another scikit-sundae than the one it was written for) or
-    subprocess.SubprocessError (the build failed)."""
+    subprocess.SubprocessError (the build failed); with ``build=False``,
+    :class:`~cmm_dae.equations.codegen.NotBuiltError` where it is not built already."""
     global _driver
     if _driver is None:
         check_version()  # before building or loading: a mismatch must never be called
         libs = _sundials_libraries()
         key = hashlib.sha256(_SOURCE.read_bytes() + "".join(map(str, libs)).encode()
                              ).hexdigest()[:20]
-        path = build_library(f"seg_{key}", [_SOURCE],
+        path = build_library(f"seg_{key}", [_SOURCE], build=build,
                              flags=(*map(str, libs), f"-Wl,-rpath,{libs[0].parent}"))
         lib = ctypes.CDLL(str(path))
         lib.cmm_seg_new.restype = _P
@@ -143,9 +148,9 @@ class SegmentRun:
 class CompiledModel:
     """A model's compiled residual and Jacobian and its configurations' event functions."""
 
-    def __init__(self, model: Model, sparse: bool = False):
+    def __init__(self, model: Model, sparse: bool = False, build: bool = True):
         self.model = model
-        self.lib = driver()
+        self.lib = driver(build)
         self.sparse = sparse
         # the Jacobian's nonzeros in CSC order, on CasADi's own pattern, whichever solver
         res, jac = model.ida.res_sx, model.ida.jac_sparse_fn
@@ -153,7 +158,8 @@ class CompiledModel:
         self.colptr = np.asarray(colind, dtype=np.intc)
         self.rowind = np.asarray(row, dtype=np.intc)
         funcs = [res, jac]
-        self.fns = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs)))
+        self.fns = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs,
+                                                 build=build)))
         self.res = _pointers(self.fns, res.name())
         self.jac = _pointers(self.fns, jac.name())
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
@@ -246,9 +252,29 @@ class CompiledModel:
             int(stats[0]), interrupted or stalled, stalled)
 
 
-#: model -> {sparse: CompiledModel or None (its build failed)}, weak in the model
-_models: weakref.WeakKeyDictionary | None = None
+#: model -> {sparse: CompiledModel, None (its build failed), _MISSING (not built: "auto"
+#: looked) or _BUILDING (a background build runs)}, weak in the model
+_models: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_MISSING, _BUILDING = "missing", "building"
 _warned = False
+_noticed = False
+_builds: list[threading.Thread] = []
+
+
+def clear() -> None:
+    """Forget the compiled segments loaded in this process (each model's is looked up
+    again: in the cache of :func:`~cmm_dae.equations.codegen.cache_dir` as it is now)."""
+    _join()
+    _models.clear()
+
+
+def _unsupported(model: Model) -> str | None:
+    """Why ``model`` runs in Python whatever the machine has, or None."""
+    if model.callables:
+        return "load laws given as Python callables run in Python"
+    if model.reacting:
+        return "friction from the reaction is solved in Python"
+    return None
 
 
 def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
@@ -256,22 +282,18 @@ def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
     with a warning (once per process) when it cannot be used: no working C compiler, no
     SUNDIALS libraries from scikit-sundae, load laws given as Python callables, or
     friction from the reaction (its event functions solve a nonlinear KKT system)."""
-    global _models, _warned
-    why = available()
-    if why is None and model.callables:
-        why = "load laws given as Python callables run in Python"
-    if why is None and model.reacting:
-        why = "friction from the reaction is solved in Python"
+    global _warned
+    why = available() or _unsupported(model)
     if why is not None:
         if not _warned:
             warnings.warn(f"compiled segment not used ({why}): running the Python path",
                           stacklevel=4)
             _warned = True
         return None
-    if _models is None:
-        _models = weakref.WeakKeyDictionary()
     per_model = _models.setdefault(model, {})
-    if sparse not in per_model:
+    if not isinstance(per_model.get(sparse), CompiledModel):
+        if per_model.get(sparse) is _BUILDING:
+            _join()
         try:
             per_model[sparse] = CompiledModel(model, sparse)
         except (OSError, subprocess.SubprocessError, RuntimeError) as e:
@@ -279,3 +301,86 @@ def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
                           "running the Python path", stacklevel=4)
             per_model[sparse] = None
     return per_model[sparse]
+
+
+def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None:
+    """The compiled segment a run of ``model`` uses, by its option ``compiled``: True
+    builds it where it can (:func:`for_model`), False never; ``"auto"`` (the default)
+    uses it where it is built already (in the cache, by an earlier run or process), never
+    builds it first and never warns: the Python path where it is not built, where the
+    machine has no compiler and for the mechanisms it does not cover
+    (:func:`build_later` builds it after a long run)."""
+    if mode is True:
+        return for_model(model, sparse)
+    if mode is False or _unsupported(model) is not None or _driver_error is not None:
+        return None
+    per_model = _models.setdefault(model, {})
+    got = per_model.get(sparse, _MISSING)
+    if got is _MISSING:
+        try:
+            got = per_model[sparse] = CompiledModel(model, sparse, build=False)
+        except NotBuiltError:
+            got = per_model[sparse] = _MISSING
+        except (OSError, subprocess.SubprocessError, RuntimeError):
+            got = per_model[sparse] = None  # (another scikit-sundae, a broken library)
+    return got if isinstance(got, CompiledModel) else None
+
+
+#: compiled="auto" builds a mechanism's segment in the background after a run of it that
+#: took at least this long in Python (s) and twice the build's estimate
+#: (:func:`build_estimate`): a run that short gains less than the build costs.
+AUTO_BUILD_AFTER = 2.0
+
+
+def build_estimate(model: Model) -> float:
+    """Seconds to build ``model``'s compiled segment, from the size of its residual and
+    Jacobian (measured with gcc -O2: 0.28-0.64 s for 1,500-3,500 CasADi instructions,
+    4.4 s for A02 with 32 loops' 13,900)."""
+    u = model.ida
+    return 0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
+
+
+def build_later(model: Model, sparse: bool, mode: bool | str, used: CompiledModel | None,
+                seconds: float) -> None:
+    """After a run of ``seconds`` (wall time) in Python under ``compiled="auto"``: build
+    the compiled segment in a background thread if the run was long enough
+    (:data:`AUTO_BUILD_AFTER`), so that the next runs of the mechanism use it; said once
+    per process (:class:`~cmm_dae.core.errors.CompileNotice`). The process waits for the
+    build at exit, so that the cache never keeps half a build."""
+    global _noticed
+    if mode != "auto" or used is not None or _unsupported(model) is not None \
+            or c_compiler() is None or _driver_error is not None:
+        return
+    per_model = _models.setdefault(model, {})
+    if per_model.get(sparse, _MISSING) is not _MISSING:
+        return  # built, building or failed
+    est = build_estimate(model)
+    if seconds < max(AUTO_BUILD_AFTER, 2.0 * est):
+        return
+    per_model[sparse] = _BUILDING
+    if not _noticed:
+        warnings.warn(f"compiled=\"auto\": building the compiled segment of "
+                      f"{model.mech.name!r} in the background (about {est:.1f} s; cached "
+                      f"in {cache_dir()}); later runs of it use it (compiled=False: never)",
+                      CompileNotice, stacklevel=6)
+        _noticed = True
+    if not _builds:
+        atexit.register(_join)
+    thread = threading.Thread(target=_build, args=(model, sparse), daemon=True,
+                              name="cmm_dae compiled segment")
+    _builds.append(thread)
+    thread.start()
+
+
+def _build(model: Model, sparse: bool) -> None:
+    per_model = _models.setdefault(model, {})
+    try:
+        per_model[sparse] = CompiledModel(model, sparse)
+    except (OSError, subprocess.SubprocessError, RuntimeError):
+        per_model[sparse] = None  # a failed background build: the Python path, quietly
+
+
+def _join() -> None:
+    """Wait for the background builds (at exit, and before a build of the same model)."""
+    for thread in list(_builds):
+        thread.join()

@@ -36,14 +36,10 @@ from .ida_steps import (
     failure,
     quiet_sundials,
     segment_times,
+    sparse_solver,
 )
 from .tolerances import ATOL_LAMBDA, lambda_atol, lambda_scale, tolerances
 
-#: IDA's unknowns from which linsolver="auto" is sparse, where at most SPARSE_FILL of the
-#: Jacobian is nonzero. Dense over sparse wall time at rtol 1e-6 / 1e-10: A02, 6 loops (98
-#: unknowns, 4.4 %) 1.00 / 0.88; 8 (130, 3.3 %) 1.05 / 1.09; 12 (194) 1.11 / 1.27; 32
-#: (514) 1.19-1.86; the shipped models (50-70 unknowns, 7-9 %) 0.93-1.11.
-SPARSE_FROM, SPARSE_FILL = 120, 0.05
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
@@ -59,6 +55,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
     @staticmethod
     def time_resolution(opts: RunOptions) -> float:
         return ev.ZENO_DT  # events are located to round-off
+
+    def after_run(self, seconds: float) -> None:
+        csegment.build_later(self.model, self.sparse, self.opts.compiled, self.c, seconds)
 
     @staticmethod
     def gap_resolution(opts: RunOptions) -> tuple[float, float]:
@@ -84,12 +83,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.res.bind_out(0, self.res_out)
         self.jac: Buffered | None = None
         self._jj: np.ndarray | None = None  # the Jacobian array the function writes into
-        # the sparse solver needs every nonzero in CasADi's pattern: Python load laws add
-        # derivatives outside it, so they keep the dense one
-        self.sparse = not model.callables and (
-            opts.linsolver == "sparse" or (opts.linsolver == "auto" and u.N >= SPARSE_FROM
-                                           and u.jac_pattern.nnz() <= SPARSE_FILL * u.N**2))
-        self.c = csegment.for_model(model, self.sparse) if opts.compiled else None
+        self.sparse = sparse_solver(model, opts.linsolver)
+        #: the compiled segment, or None for the Python path (csegment.choose)
+        self.c = csegment.choose(model, self.sparse, opts.compiled)
         self.ls_options: dict = {}
         if self.sparse:
             colind, row = u.jac_pattern.get_ccs()

@@ -25,7 +25,8 @@ from ..hybrid import policy as ev
 from .contract import RunOptions
 
 __all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOFF_ATOL",
-           "SLOW_STEPS", "failure", "quiet_sundials", "segment_times"]
+           "SLOW_STEPS", "SPARSE_FILL", "SPARSE_FROM", "failure", "quiet_sundials",
+           "segment_times", "sparse_solver"]
 
 #: A failure where the constraints' singular-value ratio is below this and falling along
 #: the motion is handed to the singular-position crossing (which says "dead point" if it
@@ -261,3 +262,21 @@ def failure(model: Model, hs, p: np.ndarray, ratio0: float, crawled: bool,
     ida = (f"{IN_PLACE_STEPS} steps too short to move t (a crawl)" if crawled
            else f"{r.message} (status {r.status})")
     return f"{what}; configuration '{cfg}'; IDA: {ida}", status, ratio
+
+
+#: IDA's unknowns from which linsolver="auto" is sparse, where at most SPARSE_FILL of the
+#: Jacobian is nonzero. Dense over sparse wall time at rtol 1e-6 / 1e-10: A02, 6 loops (98
+#: unknowns, 4.4 %) 1.00 / 0.88; 8 (130, 3.3 %) 1.05 / 1.09; 12 (194) 1.11 / 1.27; 32
+#: (514) 1.19-1.86; the shipped models (50-70 unknowns, 7-9 %) 0.93-1.11.
+SPARSE_FROM, SPARSE_FILL = 120, 0.05
+
+
+def sparse_solver(model: Model, linsolver: str) -> bool:
+    """Whether IDA (and the compiled segment) use the sparse linear solver: asked for, or
+    ``"auto"`` on a large sparse system (:data:`SPARSE_FROM`, :data:`SPARSE_FILL`). The
+    sparse solver needs every nonzero in CasADi's pattern: Python load laws add derivatives
+    outside it, so they keep the dense one."""
+    u = model.ida
+    return not model.callables and (
+        linsolver == "sparse" or (linsolver == "auto" and u.N >= SPARSE_FROM
+                                  and u.jac_pattern.nnz() <= SPARSE_FILL * u.N**2))

@@ -16,7 +16,7 @@ METHOD_NAMES = ("ida", "iterative")
 #: The defaults of the options that belong to one method (``simulate``, ``run_dae`` and
 #: ``run_iterative`` take them from here): another value with the other method is refused.
 IDA_DEFAULTS = {"rtol": 1e-8, "atol": None, "output_dt": 0.01, "linsolver": "auto",
-                "compiled": False}
+                "compiled": "auto"}
 ITERATIVE_DEFAULTS = {"dt": 0.01, "output_every": 1}
 
 #: Most memory the output samples of one run may take (their post-processed arrays), bytes.
@@ -31,7 +31,7 @@ def _is_num(x: Any) -> bool:
 
 def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: Any,
                   output_dt: Any, dt: Any, output_every: Any, max_events: Any, v_lock: Any,
-                  max_steps: Any, linsolver: Any = "auto", compiled: Any = False,
+                  max_steps: Any, linsolver: Any = "auto", compiled: Any = "auto",
                   model: Any = None) -> RunOptions:
     """Every run option checked up front; one :class:`ModelError` lists all problems,
     under ``[run]``: bad values, options of the other method given another value than
@@ -48,8 +48,9 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
     if linsolver not in ("auto", "dense", "sparse"):
         bad.append(Problem("run", "linsolver", f"expected 'auto', 'dense' or 'sparse', "
                            f"got {linsolver!r}"))
-    if not isinstance(compiled, bool):
-        bad.append(Problem("run", "compiled", f"expected True or False, got {compiled!r}"))
+    if not (isinstance(compiled, bool) or compiled == "auto"):
+        bad.append(Problem("run", "compiled", f"expected True, False or 'auto', got "
+                           f"{compiled!r}"))
     if model is not None and getattr(model, "mech", None) != mech:
         name = getattr(getattr(model, "mech", None), "name", type(model).__name__)
         bad.append(Problem("run", "model", f"a model of another mechanism ({name!r}), not "

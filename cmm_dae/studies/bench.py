@@ -56,7 +56,7 @@ def bench_models(models: list[Path], *, t_end: float = 10.0, rtol: float = 1e-8,
         build = time.perf_counter() - t0
         runs = {
             "IDA": lambda m=mech, mo=model: simulate(m, t_end, rtol=rtol, atol=rtol * 1e-2,
-                                                      model=mo),
+                                                      model=mo, compiled=False),
         }
         if compiled and not model.callables:
             runs["IDA compiled"] = lambda m=mech, mo=model: simulate(
