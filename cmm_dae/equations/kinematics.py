@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 from scipy.linalg import qr, solve_triangular
+from scipy.linalg.lapack import dpbtrf
 
 from . import kkt, rank
 from .build import Constraints
@@ -132,6 +133,8 @@ def active_nonzeros(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarr
         ri, ci = where[row[keep]], col[keep]
         order = np.lexsort((ci, ri))
         per_model[key] = (ri[order], ci[order])
+        # where each of them is in Phi_q's nonzeros (CSC order: model.phi_q_nz_fn)
+        per_model[("csc", key)] = np.flatnonzero(keep)[order]
     return per_model[key]
 
 
@@ -223,6 +226,26 @@ def _gram_band(model: Model, act: np.ndarray) -> kkt.BandedSchur | None:
     if key not in per_model:
         per_model[key] = kkt.structure(nz[0], nz[1], act.size)
     return per_model[key]
+
+
+def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:
+    """log det(J J^T) of the active rows ``act`` at many states at once, from Phi_q's
+    nonzeros ``nz`` (states, nonzeros in the CSC order of ``model.phi_q_nz_fn``): the Gram
+    matrices in their banded structure (:func:`_gram_band`), each factored by a banded
+    Cholesky (LAPACK dpbtrf); -inf where one is not positive definite (singular to
+    round-off). None where the structure is not banded. A chain of 32 loops: one sparse
+    LU per state took most of the stepped-over screen."""
+    band = _gram_band(model, act) if act.size <= model.nq else None
+    if band is None:
+        return None
+    vals = nz[:, _STRUCTURES[model][("csc", act.tobytes())]]
+    prods = vals[:, band.pa] * vals[:, band.pb]
+    ab = np.asarray((band.to_band.T @ prods.T).T).reshape(nz.shape[0], -1, band.m)
+    out = np.empty(nz.shape[0])
+    for i in range(nz.shape[0]):
+        c, info = dpbtrf(ab[i, 2 * band.bw:], lower=1)  # the lower half of the storage
+        out[i] = 2.0 * float(np.sum(np.log(c[0]))) if info == 0 else -np.inf
+    return out
 
 
 def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -> int:

@@ -20,7 +20,7 @@ from scipy.optimize import minimize_scalar
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
-from ..equations.kinematics import singular_ratio
+from ..equations.kinematics import log_gram, singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import hermite
@@ -103,6 +103,10 @@ def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     out = np.empty(t.size)
     for k, m, outs in _mapped_chunks(model, "phi_q_nz_fn", p, t, q):
         nz = np.asarray(outs[0]).reshape(row.size, -1).T  # (sample, nonzero)
+        banded = log_gram(model, act, nz[:m])
+        if banded is not None:  # a narrow band: a banded Cholesky per sample
+            out[k:k + m] = banded
+            continue
         for j in range(m):
             J = csc_matrix((nz[j], row, colind), shape=shape)[act]
             try:
