@@ -19,6 +19,8 @@ object, which builds it, is reported too (MuJoCo's times include compiling its X
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import math
 import time
 from typing import Any
@@ -31,28 +33,29 @@ from ..simulation.runner import run_dae
 from .bench import best_time
 
 __all__ = ["COLUMNS", "RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "columns", "compare_a02",
-           "error_a02", "header", "mujoco_available", "peers_table"]
+           "chain_row", "error_a02", "header", "mujoco_available", "peer", "peers_table"]
 
 #: The tolerances cmm_dae tries, loosest first (atol = 1e-2 rtol as in any run).
 RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 
 
-def _mujoco() -> Any:
+def peer(module: str, name: str) -> Any:
+    """The peer code's Python module (``import_module(module)``), or a CmmError that says
+    how to get it (the optional extra ``peers``); ``name`` is how a user calls it."""
     try:
-        import mujoco
+        return importlib.import_module(module)
     except ImportError as e:
-        raise CmmError("the peer comparison needs MuJoCo: pip install 'cmm_dae[peers]'"
-                       ) from e
-    return mujoco
+        raise CmmError(f"the comparison with {name} needs {name}: pip install "
+                       "'cmm_dae[peers]'") from e
+
+
+def _mujoco() -> Any:
+    return peer("mujoco", "MuJoCo")
 
 
 def mujoco_available() -> bool:
     """Whether MuJoCo can be imported here."""
-    try:
-        _mujoco()
-    except CmmError:
-        return False
-    return True
+    return importlib.util.find_spec("mujoco") is not None
 
 
 def _a02_xml(n: int, h: float) -> str:
@@ -143,6 +146,31 @@ def error_a02(t: np.ndarray, tip: np.ndarray, n: int) -> float:
     return float(np.max(np.linalg.norm(tip - iftomm.a02_reference(n, t), axis=1)))
 
 
+def chain_row(n: int, name: str, run_peer, *, t_end: float, h: float, repeat: int,
+              rtols: tuple[float, ...]) -> dict:
+    """A02 with ``n`` loops run by a peer, ``run_peer(n, t_end, h) -> (t, tip)``, and by
+    cmm_dae at the cheapest of ``rtols`` reaching its error: ``loops``, ``h``,
+    ``<name>_error`` (m), ``rtol`` (None where none did), ``cmm_dae_error`` (m), the best
+    wall times ``<name>_s`` and ``cmm_dae_s`` (s), alternating, and ``ratio``, cmm_dae's
+    over the peer's."""
+    mech = iftomm.a02_four_bar(n)
+    err_peer = error_a02(*run_peer(n, t_end, h), n)
+
+    def error_at(rtol: float) -> float | None:
+        res = run_dae(mech, t_end, rtol=rtol, throw=False)
+        return error_a02(res.t, iftomm.crank_tip(res), n) if res.success else None
+
+    chosen, err = cheapest(error_at, err_peer, rtols)
+    row = {"loops": n, "h": h, f"{name}_error": err_peer, "rtol": chosen,
+           "cmm_dae_error": err}
+    # side by side: best-of-repeat timings
+    row[f"{name}_s"] = best_time(lambda: run_peer(n, t_end, h), repeat)[0]
+    row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)[0]
+                        if chosen is not None else math.nan)
+    row["ratio"] = row["cmm_dae_s"] / row[f"{name}_s"]
+    return row
+
+
 def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
                 rtols: tuple[float, ...] = RTOLS) -> dict:
     """One row of the comparison on A02 with ``n`` loops.
@@ -156,22 +184,8 @@ def compare_a02(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: int = 3,
         MuJoCo is faster); ``cmm_dae_first_s`` and ``first_ratio``: the same for the first
         run of a new mechanism object (its model built in the run).
     """
-    mech = iftomm.a02_four_bar(n)
-    t_mj, tip_mj = a02_mujoco(n, t_end, h)
-    err_mj = error_a02(t_mj, tip_mj, n)
-
-    def error_at(rtol: float) -> float | None:
-        res = run_dae(mech, t_end, rtol=rtol, throw=False)
-        return error_a02(res.t, iftomm.crank_tip(res), n) if res.success else None
-
-    chosen, err = cheapest(error_at, err_mj, rtols)
-    row = {"loops": n, "h": h, "mujoco_error": err_mj, "rtol": chosen,
-           "cmm_dae_error": err}
-    # side by side: alternating best-of-repeat timings
-    row["mujoco_s"] = best_time(lambda: a02_mujoco(n, t_end, h), repeat)[0]
-    row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)[0]
-                        if chosen is not None else math.nan)
-    row["ratio"] = row["cmm_dae_s"] / row["mujoco_s"]
+    row = chain_row(n, "mujoco", a02_mujoco, t_end=t_end, h=h, repeat=repeat, rtols=rtols)
+    chosen = row["rtol"]
     first = math.nan
     if chosen is not None:  # a new mechanism object: its model is built in the run
         fresh = iftomm.a02_four_bar(n)

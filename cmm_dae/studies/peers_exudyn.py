@@ -13,37 +13,28 @@ against it side by side.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import math
 from typing import Any
 
 import numpy as np
 
-from ..core.errors import CmmError
 from ..description import iftomm
-from ..simulation.runner import run_dae
-from .bench import best_time
-from .peers import RTOLS, cheapest, columns, error_a02, header
+from .peers import RTOLS, chain_row, columns, header, peer
 
 __all__ = ["a02_exudyn", "compare_a02_exudyn", "exudyn_available", "exudyn_table"]
 
 
 def _exudyn() -> Any:
-    try:
-        import exudyn
-        import exudyn.itemInterface
-    except ImportError as e:
-        raise CmmError("the Exudyn comparison needs Exudyn: pip install 'cmm_dae[peers]'"
-                       ) from e
+    exudyn = peer("exudyn", "Exudyn")
+    importlib.import_module("exudyn.itemInterface")
     return exudyn
 
 
 def exudyn_available() -> bool:
     """Whether Exudyn can be imported here."""
-    try:
-        _exudyn()
-    except CmmError:
-        return False
-    return True
+    return importlib.util.find_spec("exudyn") is not None
 
 
 def a02_exudyn(n: int, t_end: float, h: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
@@ -106,21 +97,7 @@ def compare_a02_exudyn(n: int, *, t_end: float = 2.0, h: float = 1e-2, repeat: i
     ``h`` (s), ``exudyn_error`` (m) and ``exudyn_s`` (best wall time, s), cmm_dae's chosen
     ``rtol`` (None where none of ``rtols`` reached Exudyn's error), ``cmm_dae_error`` (m)
     and ``cmm_dae_s``, and ``ratio`` = cmm_dae's time over Exudyn's."""
-    mech = iftomm.a02_four_bar(n)
-    t_ex, tip_ex = a02_exudyn(n, t_end, h)
-    err_ex = error_a02(t_ex, tip_ex, n)
-
-    def error_at(rtol: float) -> float | None:
-        res = run_dae(mech, t_end, rtol=rtol, throw=False)
-        return error_a02(res.t, iftomm.crank_tip(res), n) if res.success else None
-
-    chosen, err = cheapest(error_at, err_ex, rtols)
-    row = {"loops": n, "h": h, "exudyn_error": err_ex, "rtol": chosen, "cmm_dae_error": err}
-    row["exudyn_s"] = best_time(lambda: a02_exudyn(n, t_end, h), repeat)[0]
-    row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)[0]
-                        if chosen is not None else math.nan)
-    row["ratio"] = row["cmm_dae_s"] / row["exudyn_s"]
-    return row
+    return chain_row(n, "exudyn", a02_exudyn, t_end=t_end, h=h, repeat=repeat, rtols=rtols)
 
 
 def exudyn_table(rows: list[dict]) -> str:
