@@ -12,7 +12,10 @@ the same driving effort (1e-9 N m) and prints the ratio of the medians::
     python validation/before_after.py --before 8e35cf9 --model a02:10 --t-end 2
 
 With ``--compiled`` the working tree is also timed with ``compiled=True`` (the C segment,
-built once into a temporary cache before the timed runs), as a third column. ``--floor``
+built once into a temporary cache before the timed runs), as a third column; its default
+runs (``compiled="auto"`` from 0.3 on) then find that build and run in C too, as they do on
+a machine where the mechanism has run before. Without it the cache stays empty and the
+default runs take the Python path, as on a fresh machine. ``--floor``
 (with ``--compiled``) adds the floor of any path through scikit-sundae's Python callbacks
 that takes the same steps: the compiled time plus, per callback the default path makes
 (residual, Jacobian and root-function calls, counted), scikit-sundae's own cost of calling

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import weakref
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
@@ -226,6 +227,24 @@ def _gram_band(model: Model, act: np.ndarray) -> kkt.BandedSchur | None:
     if key not in per_model:
         per_model[key] = kkt.structure(nz[0], nz[1], act.size)
     return per_model[key]
+
+
+def gram_function(model: Model) -> ca.Function:
+    """``gram(q, t, p)``: the constraint Jacobian's Gram matrix ``Phi_q Phi_q^T`` (m x m)
+    with 1 on the diagonal of the inactive lock rows (whose rows are zero), so that its
+    determinant is that of the active rows' Gram matrix; built once per model (as
+    ``model.gram_fn``, for :meth:`~cmm_dae.equations.model.Model.mapped`). The product in
+    CasADi follows Phi_q's sparsity: the double-folded mechanism's stepped-over screen
+    formed it in numpy from the dense Jacobians of 1000 samples."""
+    fn = getattr(model, "gram_fn", None)
+    if fn is None:
+        sy = model.sym
+        G = sy["Phi_q"] @ sy["Phi_q"].T + ca.diag(sy["free"])
+        if model.theta_paths:
+            G = ca.substitute(G, model.theta, ca.DM(model.theta0))
+        fn = model.gram_fn = ca.Function("gram", [sy["q"], sy["t"], sy["p"]],
+                                         [ca.densify(G)])
+    return fn
 
 
 def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:

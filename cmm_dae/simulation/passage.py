@@ -20,7 +20,7 @@ from scipy.optimize import minimize_scalar
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
-from ..equations.kinematics import log_gram, singular_ratio
+from ..equations.kinematics import gram_function, log_gram, singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import hermite
@@ -84,10 +84,10 @@ def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     if model.kkt_sparse:
         return _log_gram_sparse(model, p, t, q, act)
     out = np.empty(t.size)
-    for k, m, outs in _mapped_chunks(model, "phi_fn", p, t, q):
-        J = np.asarray(outs[1]).reshape(model.m, -1, model.nq)
-        J = J.transpose(1, 0, 2)[:m, act, :]
-        sign, logdet = np.linalg.slogdet(J @ J.transpose(0, 2, 1))
+    gram_function(model)  # (model.gram_fn, built on first use)
+    for k, m, outs in _mapped_chunks(model, "gram_fn", p, t, q):
+        G = np.asarray(outs[0]).reshape(model.m, -1, model.m).transpose(1, 0, 2)[:m]
+        sign, logdet = np.linalg.slogdet(G)
         out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
     return out
 
