@@ -3,6 +3,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import math
 import os
 
 import pytest
@@ -28,6 +29,9 @@ def _empty_compiled_cache(request, tmp_path_factory, monkeypatch):
 
     if not getattr(request.module, "SHARED_CACHE", False):
         monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cmm_cache")))
+    # no background builds after long runs (a chain of 48 loops would build for 6 s into
+    # a cache thrown away with the test); the tests of that rule set it themselves
+    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", math.inf)
     csegment.clear()
     yield
     csegment.clear()
