@@ -167,6 +167,15 @@ def test_another_scikit_sundae_falls_back_with_one_warning(monkeypatch):
     assert sum("scikit-sundae 9.0.0" in str(w.message) for w in caught) == 1
     ref = cd.run_dae(mech, 0.5)
     assert np.array_equal(res.joint("O").position, ref.joint("O").position)
+    # the default ("auto") in a new process: the same single warning, the Python path
+    monkeypatch.setattr(csegment, "_driver_error", None)
+    monkeypatch.setattr(csegment, "_warned", False)
+    csegment.clear()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert not cd.run_dae(mech, 0.5).meta["compiled"]
+        assert not cd.run_dae(mech, 0.5).meta["compiled"]
+    assert sum("scikit-sundae 9.0.0" in str(w.message) for w in caught) == 1
 
 
 def test_auto_runs_compiled_where_the_build_is_cached(monkeypatch, tmp_path):

@@ -307,13 +307,24 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None
     """The compiled segment a run of ``model`` uses, by its option ``compiled``: True
     builds it where it can (:func:`for_model`), False never; ``"auto"`` (the default)
     uses it where it is built already (in the cache, by an earlier run or process), never
-    builds it first and never warns: the Python path where it is not built, where the
-    machine has no compiler and for the mechanisms it does not cover
-    (:func:`build_later` builds it after a long run)."""
+    builds it first: the Python path where it is not built, where the machine has no
+    compiler and for the mechanisms it does not cover, quietly (:func:`build_later` builds
+    it after a long run); with another scikit-sundae than the driver was written for,
+    with one warning."""
+    global _driver_error, _warned
     if mode is True:
         return for_model(model, sparse)
     if mode is False or _unsupported(model) is not None or _driver_error is not None:
         return None
+    if _driver is None:
+        try:  # another scikit-sundae: never loaded; said once, as with True
+            check_version()
+        except OSError as e:
+            _driver_error = str(e)
+            if not _warned:
+                warnings.warn(f"compiled segment not used ({e})", stacklevel=4)
+                _warned = True
+            return None
     per_model = _models.setdefault(model, {})
     got = per_model.get(sparse, _MISSING)
     if got is _MISSING:
