@@ -81,7 +81,7 @@ def test_banded_schur_complement_solves_the_kkt_system():
     res = cd.run_dae(mech, 0.05, model=model)
     t, q, v = res.t, res.data["q"], res.data["v"]
     P = np.tile(model.params(), (t.size, 1))
-    a, lam, Phi_q = post.batch_kkt(model, t, q, v, P)
+    a, lam = post.batch_kkt(model, t, q, v, P)
     for i in (0, t.size // 2, t.size - 1):
         Pq, Qf, gamma = (np.asarray(x) for x in model.kkt_fn(q[i], v[i], t[i], P[i]))
         Qf, gamma = Qf.ravel(), gamma.ravel()
@@ -92,7 +92,7 @@ def test_banded_schur_complement_solves_the_kkt_system():
     saved = schur._cache[model]
     schur._cache[model] = None  # force the dense Schur complement
     try:
-        _, lam_d, _ = post.batch_kkt(model, t, q, v, P)
+        _, lam_d = post.batch_kkt(model, t, q, v, P)
     finally:
         schur._cache[model] = saved
     assert np.max(np.abs(lam - lam_d)) <= 1e-10 * np.max(np.abs(lam_d))

@@ -23,7 +23,7 @@ import numpy as np
 from ..description.mechanism import GROUND
 from .gearing import tooth
 
-__all__ = ["NAMES", "expressions", "function", "kept_to_all"]
+__all__ = ["NAMES", "drift_function", "expressions", "function", "kept_to_all"]
 
 #: the Result's series :func:`function` gives, in its order: joint forces (2 per joint,
 #: x then y), joint moments (1 per joint), tooth forces (2 per gear pair), driver efforts
@@ -96,3 +96,18 @@ def kept_to_all(model) -> np.ndarray:
     E = np.zeros((len(model.all_rows), model.m))
     E[keep, np.arange(model.m)] = 1.0
     return E
+
+
+def drift_function(model) -> ca.Function:
+    """``drift(q, v, t, p) -> (phi, phi')``: the constraint values (m,) and their rates
+    ``Phi_q v + Phi_t`` (m,), which a Result's drift series bound; built once per model
+    (``model.drift_fn``), so that post-processing never takes Phi_q out for them."""
+    fn = getattr(model, "drift_fn", None)
+    if fn is None:
+        sy = model.sym
+        out = [sy["phi"], sy["h"]]
+        if model.theta_paths:
+            out = ca.substitute(out, [model.theta], [ca.DM(model.theta0)])
+        fn = model.drift_fn = ca.Function("drift", [sy["q"], sy["v"], sy["t"], sy["p"]],
+                                          [ca.densify(x) for x in out])
+    return fn

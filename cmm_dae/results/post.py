@@ -18,7 +18,7 @@ from .result import Configuration, Event, Result, Stats
 
 
 def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndarray,
-                        Phi_q: np.ndarray) -> np.ndarray:
+                        P: np.ndarray) -> np.ndarray:
     """Multipliers over every row (the dropped redundant ones included): the generalized
     force of the joint and driver rows, ``Phi_q^T lambda``, is what the equations
     determine; among the multipliers of all those rows that give it, the one of minimum
@@ -27,6 +27,8 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
     B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
         1, 0, 2)
     nkeep = nb - len(model.dropped)
+    Phi_q = np.asarray(model.mapped("phi_fn", n)(q.T, t, P.T)[1]).reshape(
+        model.m, n, model.nq).transpose(1, 0, 2)
     G = np.einsum("nrk,nr->nk", Phi_q[:, :nkeep, :], lam[:, :nkeep])
     # rcond: the redundant directions are zero only to round-off; cut them, not the small
     # but real singular values near a singular position
@@ -51,19 +53,19 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
              active: np.ndarray) -> dict[str, np.ndarray]:
     """The per-sample series of one chunk of samples (see :func:`build_result`)."""
     n = t.size
-    a, lam, Phi_q = batch_kkt(model, t, q, v, P)
+    a, lam = batch_kkt(model, t, q, v, P)
     c, cd, cdd, _ = (np.asarray(x).reshape(-1, n) for x in
                      model.mapped("post_fn", n)(q.T, v.T, a.T, t))
     extras = [np.asarray(x).reshape(-1, n).T
               for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
-    phi_m = model.mapped("phi_fn", n)(q.T, t, P.T)
-    phi = np.asarray(phi_m[0]).reshape(-1, n).T
-    hvel = np.einsum("nrk,nk->nr", Phi_q, v) + np.asarray(phi_m[2]).reshape(-1, n).T
+    outputs.drift_function(model)  # (model.drift_fn, built on first use)
+    phi, hvel = (np.asarray(x).reshape(-1, n).T
+                 for x in model.mapped("drift_fn", n)(q.T, v.T, t, P.T))
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
 
     if model.dropped:  # redundant rows: the reactions shared out at minimum norm
-        lam = _min_norm_reactions(model, t, q, lam, Phi_q)
+        lam = _min_norm_reactions(model, t, q, lam, P)
     # the joints' forces and moments, the teeth's, the drivers' efforts (equations.outputs)
     outputs.function(model)  # (model.outputs_fn, built on first use)
     jforce, jtorque, gforce, effort = (
