@@ -32,7 +32,7 @@ from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.errors import CompileNotice
 from ..core.progress import Bar
-from ..equations import kkt
+from ..equations import compiled, kkt
 from ..equations.codegen import NotBuiltError, build_library, c_compiler, cache_dir, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -162,6 +162,8 @@ class CompiledModel:
                                                  build=build)))
         self.res = _pointers(self.fns, res.name())
         self.jac = _pointers(self.fns, jac.name())
+        # post-processing and the screen in C too, where built (or now, with build)
+        self.outputs = compiled.use_compiled(model, build)
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
