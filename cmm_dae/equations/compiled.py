@@ -4,8 +4,10 @@ run's compiled segment.
 A Result's series and the screen for singular positions come from functions mapped over
 every sample (:meth:`~cmm_dae.equations.model.Model.mapped`): the joints' forces and the
 drivers' efforts (:mod:`.outputs`), the Schur complements of the KKT systems and the
-accelerations (:func:`.kkt.schur_functions`), the constraints' drift, the Gram matrices of
-the screen (:func:`.kinematics.gram_function`). CasADi's virtual machine evaluates them a
+accelerations (:func:`.kkt.schur_functions`), the coordinates, elements, loads and drift
+(:func:`.outputs.series_function`), the Gram matrices of the screen
+(:func:`.kinematics.gram_function`); and the model's single-state evaluators (constraints,
+joint coordinates, KKT parts, event parts). CasADi's virtual machine evaluates them a
 node at a time; generated C does the same operations in the same order, so the numbers
 agree to round-off. Where a run uses the compiled segment (``compiled=True``, or
 ``"auto"`` with the build cached), these functions are compiled into one more cached
@@ -20,20 +22,23 @@ import casadi as ca
 import numpy as np
 
 from . import kinematics, kkt, outputs
-from .codegen import NotBuiltError, build_library, function_key
+from .codegen import Buffered, NotBuiltError, build_library, function_key
 from .model import Model
 
-__all__ = ["MAPPED", "use_compiled"]
+__all__ = ["MAPPED", "SINGLE", "use_compiled"]
 
 #: The model's attributes so replaced, and the names of their CasADi functions.
-MAPPED = {"outputs_fn": "outputs", "drift_fn": "drift", "gram_fn": "gram",
+MAPPED = {"outputs_fn": "outputs", "series_fn": "series", "gram_fn": "gram",
           "schur_fn": "schur", "acc_fn": "acc"}
+#: The model's single-state evaluators (:class:`~.codegen.Buffered`) so replaced.
+SINGLE = ("_phi", "_coord", "_cvel", "_post", "_kin", "_rates_jac", "_kkt_parts", "_free",
+          "event_parts")
 
 
 def _functions(model: Model) -> dict[str, ca.Function]:
     """The functions of :data:`MAPPED` that ``model`` has, built where not yet."""
     outputs.function(model)
-    outputs.drift_function(model)
+    outputs.series_function(model)
     kinematics.gram_function(model)
     if model.m and np.all(model.mass > 0.0):  # (the Schur complement needs every mass)
         kkt.schur_functions(model)
@@ -48,15 +53,18 @@ def use_compiled(model: Model, build: bool = True) -> bool:
     if getattr(model, "outputs_compiled", False):
         return True
     funcs = _functions(model)
+    singles = {attr: getattr(model, attr).fn for attr in SINGLE}
+    every = [*funcs.values(), *singles.values()]
     try:
-        lib = build_library(function_key(list(funcs.values())), None, list(funcs.values()),
-                            build=build)
+        lib = build_library(function_key(every), None, every, build=build)
     except NotBuiltError:
         return False
     except (OSError, subprocess.SubprocessError, RuntimeError):
         return False  # the model's own functions give the same numbers
     for attr, f in funcs.items():
         setattr(model, attr, ca.external(f.name(), str(lib)))
+    for attr, f in singles.items():
+        setattr(model, attr, Buffered(ca.external(f.name(), str(lib))))
     # the maps built on the virtual machine's functions go (they are built anew on use)
     model._maps = {k: v for k, v in model._maps.items() if k[0] not in MAPPED}
     model.outputs_compiled = True

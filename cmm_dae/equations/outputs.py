@@ -23,7 +23,7 @@ import numpy as np
 from ..description.mechanism import GROUND
 from .gearing import tooth
 
-__all__ = ["NAMES", "drift_function", "expressions", "function", "kept_to_all"]
+__all__ = ["NAMES", "expressions", "function", "kept_to_all", "series_function"]
 
 #: the Result's series :func:`function` gives, in its order: joint forces (2 per joint,
 #: x then y), joint moments (1 per joint), tooth forces (2 per gear pair), driver efforts
@@ -98,16 +98,20 @@ def kept_to_all(model) -> np.ndarray:
     return E
 
 
-def drift_function(model) -> ca.Function:
-    """``drift(q, v, t, p) -> (phi, phi')``: the constraint values (m,) and their rates
-    ``Phi_q v + Phi_t`` (m,), which a Result's drift series bound; built once per model
-    (``model.drift_fn``), so that post-processing never takes Phi_q out for them."""
-    fn = getattr(model, "drift_fn", None)
+def series_function(model) -> ca.Function:
+    """``series(q, v, a, t, p)``: every per-sample series of a Result but the forces, in
+    one function for post-processing to map: the joint coordinates, rates and
+    accelerations, the elements' lengths, rates and tensions, the loads' values and powers
+    (the model's ``post_fn`` and ``extras_fn``), the constraint values and their rates
+    ``Phi_q v + Phi_t`` (the drift); built once per model (``model.series_fn``)."""
+    fn = getattr(model, "series_fn", None)
     if fn is None:
         sy = model.sym
-        out = [sy["phi"], sy["h"]]
+        q, v, a, t, p = sy["q"], sy["v"], sy["a"], sy["t"], sy["p"]
+        drift = [sy["phi"], sy["h"]]
         if model.theta_paths:
-            out = ca.substitute(out, [model.theta], [ca.DM(model.theta0)])
-        fn = model.drift_fn = ca.Function("drift", [sy["q"], sy["v"], sy["t"], sy["p"]],
-                                          [ca.densify(x) for x in out])
+            drift = ca.substitute(drift, [model.theta], [ca.DM(model.theta0)])
+        out = [*model.post_fn(q, v, a, t)[:3], *model.extras_fn(q, v, t, p), *drift]
+        fn = model.series_fn = ca.Function("series", [q, v, a, t, p],
+                                           [ca.densify(x) for x in out])
     return fn

@@ -54,13 +54,10 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     """The per-sample series of one chunk of samples (see :func:`build_result`)."""
     n = t.size
     a, lam = batch_kkt(model, t, q, v, P)
-    c, cd, cdd, _ = (np.asarray(x).reshape(-1, n) for x in
-                     model.mapped("post_fn", n)(q.T, v.T, a.T, t))
-    extras = [np.asarray(x).reshape(-1, n).T
-              for x in model.mapped("extras_fn", n)(q.T, v.T, t, P.T)]
-    outputs.drift_function(model)  # (model.drift_fn, built on first use)
-    phi, hvel = (np.asarray(x).reshape(-1, n).T
-                 for x in model.mapped("drift_fn", n)(q.T, v.T, t, P.T))
+    outputs.series_function(model)  # (model.series_fn, built on first use)
+    c, cd, cdd, *extras, phi, hvel = (
+        np.asarray(x).reshape(-1, n).T
+        for x in model.mapped("series_fn", n)(q.T, v.T, a.T, t, P.T))
     drift_pos = np.max(np.abs(phi) * active, axis=1, initial=0.0)
     drift_vel = np.max(np.abs(hvel) * active, axis=1, initial=0.0)
 
@@ -72,7 +69,7 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
         np.asarray(x).reshape(-1, n).T
         for x in model.mapped("outputs_fn", n)(q.T, P.T, lam.T))
     nj = len(model.joint_names)
-    return {"a": a, "lam": lam, "c": c.T, "cd": cd.T, "cdd": cdd.T,
+    return {"a": a, "lam": lam, "c": c, "cd": cd, "cdd": cdd,
             "jforce": jforce.reshape(n, nj, 2), "gforce": gforce.reshape(n, -1, 2),
             "jtorque": jtorque, "effort": effort, "drift_pos": drift_pos,
             "drift_vel": drift_vel,
