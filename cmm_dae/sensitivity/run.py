@@ -44,6 +44,7 @@ from ..equations.model import Model
 from ..hybrid.equilibrium import solve_equilibrium
 from ..hybrid.start import redundant_base_rows
 from ..results.result import Result
+from ..simulation.options import default_atol
 from ..simulation.runner import simulate
 from .model import Equations
 from .replay import SensitivityPass
@@ -248,7 +249,7 @@ def sensitivities(mech: Mechanism, params: Sequence[str], t_end: float = 10.0, *
     run_options.pop("method", None)
     paths = check_params(mech, params)
     if atol is None and isinstance(rtol, float | int):
-        atol = 1e-2 * rtol  # as for a run
+        atol = default_atol(rtol)  # as for a run
     mech, model, eq, solved = _sensitivity_model(mech, paths)
     trace: list = []
     res = simulate(mech, t_end, method="ida", rtol=rtol, atol=atol, output_dt=output_dt,

@@ -29,6 +29,16 @@ def _is_num(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
+#: atol's default as a share of rtol: tighter with rtol (a fixed atol caps the accuracy
+#: where a coordinate passes zero)
+ATOL_PER_RTOL = 1e-2
+
+
+def default_atol(rtol: float) -> float:
+    """IDA's absolute tolerance where none is given: :data:`ATOL_PER_RTOL` of ``rtol``."""
+    return ATOL_PER_RTOL * rtol
+
+
 def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: Any,
                   output_dt: Any, dt: Any, output_every: Any, max_events: Any, v_lock: Any,
                   max_steps: Any, linsolver: Any = "auto", compiled: Any = "auto",
@@ -76,7 +86,7 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
     ok_rtol = need(_is_num(rtol) and 1e-15 <= rtol <= 1e-2, "rtol",
                    "expected 1e-15 <= rtol <= 1e-2", rtol)
     if atol is None and ok_rtol:
-        atol = 1e-2 * rtol  # tighter with rtol (a fixed atol caps it where y passes 0)
+        atol = default_atol(rtol)
     need((atol is None and not ok_rtol) or (_is_num(atol) and 0 < atol <= 1e-2), "atol",
          "expected 0 < atol <= 1e-2 or None", atol)
     ok_out = need(output_dt is None or (_is_num(output_dt) and math.isfinite(output_dt)
