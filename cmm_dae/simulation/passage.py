@@ -87,8 +87,12 @@ def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     gram_function(model)  # (model.gram_fn, built on first use)
     for k, m, outs in _mapped_chunks(model, "gram_fn", p, t, q):
         G = np.asarray(outs[0]).reshape(model.m, -1, model.m).transpose(1, 0, 2)[:m]
-        sign, logdet = np.linalg.slogdet(G)
-        out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
+        try:  # Cholesky: a third of an LU's time on these small symmetric matrices
+            L = np.linalg.cholesky(G)
+            out[k:k + m] = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
+        except np.linalg.LinAlgError:  # one is singular to round-off: LU for the chunk
+            sign, logdet = np.linalg.slogdet(G)
+            out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
     return out
 
 
