@@ -21,7 +21,8 @@ def _load(arg: str):
 
 def _summary(res) -> None:
     s = res.stats
-    print(f"{res.layout.mechanism} ({s.method}): t = {res.t[0]:g} .. {res.t[-1]:g} s, "
+    how = f"{s.method}, in C" if res.meta.get("compiled") else s.method
+    print(f"{res.layout.mechanism} ({how}): t = {res.t[0]:g} .. {res.t[-1]:g} s, "
           f"{res.t.size} samples, {s.steps} steps, {s.nfev} residual / {s.njev} Jacobian "
           f"evaluations, {len(res.events)} events, wall {s.wall_time * 1e3:.1f} ms "
           f"(model build {s.build_time * 1e3:.1f} ms)")

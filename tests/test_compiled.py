@@ -267,3 +267,22 @@ def test_post_processing_in_c_gives_the_same_series():
     fast = cd.Model(mech)
     assert cd.run_dae(mech, 1.0, model=fast, compiled=True).meta["compiled"]
     assert fast.outputs_compiled
+
+
+def test_cli_says_which_path_ran(capsys, monkeypatch, tmp_path):
+    """`cmm-dae run`: --compiled runs in C and says so, the default then finds the build,
+    --no-compiled runs in Python; both flags at once are refused (exit 2)."""
+    from cmm_dae.cli import main
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    csegment.clear()
+    assert main(["run", "pendulum_stop", "--t-end", "0.2", "--compiled"]) == 0
+    assert "(ida, in C)" in capsys.readouterr().out
+    csegment.clear()
+    assert main(["run", "pendulum_stop", "--t-end", "0.2"]) == 0
+    assert "(ida, in C)" in capsys.readouterr().out
+    assert main(["run", "pendulum_stop", "--t-end", "0.2", "--no-compiled"]) == 0
+    assert "(ida):" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "pendulum_stop", "--compiled", "--no-compiled"])
+    assert stop.value.code == 2

@@ -374,7 +374,8 @@ def build_later(model: Model, sparse: bool, mode: bool | str, used: CompiledMode
     if not _noticed:
         warnings.warn(f"compiled=\"auto\": building the compiled segment of "
                       f"{model.mech.name!r} in the background (about {est:.1f} s; cached "
-                      f"in {cache_dir()}); later runs of it use it (compiled=False: never)",
+                      f"in {cache_dir()}); later runs of it use it (never: compiled=False, "
+                      "or --no-compiled)",
                       CompileNotice, stacklevel=6)
         _noticed = True
     if not _builds:
