@@ -208,9 +208,7 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     J = model.constraints(q, t, p).Phi_q[act]
     band = _gram_band(model, act) if act.size <= model.nq else None
     if band is not None:
-        vals = J[band.rows, band.cols]
-        ab = (band.to_band.T @ (vals[band.pa] * vals[band.pb])).reshape(-1, band.m)
-        r = rank.band_ratio(ab[2 * band.bw:])  # the lower half of dgbsv's storage
+        r = rank.band_ratio(_gram_lower(band, J[band.rows, band.cols][None])[0])
         if r >= rank.BANDED_TRUSTED:
             return r
     return rank.ratio(J)
@@ -247,6 +245,15 @@ def gram_function(model: Model) -> ca.Function:
     return fn
 
 
+def _gram_lower(band: kkt.BandedSchur, vals: np.ndarray) -> np.ndarray:
+    """The Gram matrices of states whose Jacobian nonzeros (at ``band.rows``,
+    ``band.cols``) are ``vals`` (states, nonzeros), in LAPACK's lower band storage
+    (states, bw + 1, m): the lower half of the banded structure's dgbsv storage."""
+    prods = vals[:, band.pa] * vals[:, band.pb]
+    ab = np.asarray((band.to_band.T @ prods.T).T).reshape(vals.shape[0], -1, band.m)
+    return ab[:, 2 * band.bw:]
+
+
 def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:
     """log det(J J^T) of the active rows ``act`` at many states at once, from Phi_q's
     nonzeros ``nz`` (states, nonzeros in the CSC order of ``model.phi_q_nz_fn``): the Gram
@@ -257,12 +264,10 @@ def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None
     band = _gram_band(model, act) if act.size <= model.nq else None
     if band is None:
         return None
-    vals = nz[:, _STRUCTURES[model][("csc", act.tobytes())]]
-    prods = vals[:, band.pa] * vals[:, band.pb]
-    ab = np.asarray((band.to_band.T @ prods.T).T).reshape(nz.shape[0], -1, band.m)
+    ab = _gram_lower(band, nz[:, _STRUCTURES[model][("csc", act.tobytes())]])
     out = np.empty(nz.shape[0])
     for i in range(nz.shape[0]):
-        c, info = dpbtrf(ab[i, 2 * band.bw:], lower=1)  # the lower half of the storage
+        c, info = dpbtrf(ab[i], lower=1)
         out[i] = 2.0 * float(np.sum(np.log(c[0]))) if info == 0 else -np.inf
     return out
 

@@ -218,18 +218,11 @@ def schur_functions(model: Any) -> None:
     lambda)``; built once, their products on Phi_q's sparsity (A02, 8 loops: 1.13x)."""
     if getattr(model, "schur_fn", None) is not None:
         return
-    sy = model.sym
-    Phi_q, Qf = sy["Phi_q"], sy["Qf"]
-    inv = 1.0 / sy["mass"]
-    PM = Phi_q @ ca.diag(inv)
+    args = [model.sym[x] for x in ("q", "v", "t", "p")]
+    system = symbolic(model, *args, schur=True)
     lam = ca.SX.sym("lam", model.m)
-    out = [PM @ Phi_q.T - ca.diag(sy["free"]), PM @ Qf - sy["gamma"],
-           (Qf - Phi_q.T @ lam) * inv]
-    if model.theta_paths:
-        out = ca.substitute(out, [model.theta], [ca.DM(model.theta0)])
-    args = [sy["q"], sy["v"], sy["t"], sy["p"]]
-    model.schur_fn = ca.Function("schur", args, [ca.densify(x) for x in out[:2]])
-    model.acc_fn = ca.Function("acc", [*args, lam], [ca.densify(out[2])])
+    model.schur_fn = ca.Function("schur", args, [ca.densify(system.A), ca.densify(system.b)])
+    model.acc_fn = ca.Function("acc", [*args, lam], [ca.densify(system.unpack(lam)[0])])
 
 
 def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray

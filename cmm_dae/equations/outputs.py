@@ -23,11 +23,7 @@ import numpy as np
 from ..description.mechanism import GROUND
 from .gearing import tooth
 
-__all__ = ["NAMES", "expressions", "function", "kept_to_all", "series_function"]
-
-#: the Result's series :func:`function` gives, in its order: joint forces (2 per joint,
-#: x then y), joint moments (1 per joint), tooth forces (2 per gear pair), driver efforts
-NAMES = ("jforce", "jtorque", "gforce", "effort")
+__all__ = ["expressions", "function", "kept_to_all", "series_function"]
 
 
 def _all_rows_jacobian(model):

@@ -163,7 +163,7 @@ class CompiledModel:
         self.res = _pointers(self.fns, res.name())
         self.jac = _pointers(self.fns, jac.name())
         # post-processing and the screen in C too, where built (or now, with build)
-        self.outputs = compiled.use_compiled(model, build)
+        compiled.use_compiled(model, build)
         self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
@@ -264,10 +264,17 @@ _builds: list[threading.Thread] = []
 
 
 def clear() -> None:
-    """Forget the compiled segments loaded in this process (each model's is looked up
-    again: in the cache of :func:`~cmm_dae.equations.codegen.cache_dir` as it is now)."""
+    """Forget the compiled segments loaded in this process (looked up in the cache again)."""
     _join()
     _models.clear()
+
+
+def _warn_once(message: str) -> None:
+    """Say why the compiled segment is not used, once per process."""
+    global _warned
+    if not _warned:
+        warnings.warn(message, stacklevel=5)
+        _warned = True
 
 
 def _unsupported(model: Model) -> str | None:
@@ -284,13 +291,9 @@ def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
     with a warning (once per process) when it cannot be used: no working C compiler, no
     SUNDIALS libraries from scikit-sundae, load laws given as Python callables, or
     friction from the reaction (its event functions solve a nonlinear KKT system)."""
-    global _warned
     why = available() or _unsupported(model)
     if why is not None:
-        if not _warned:
-            warnings.warn(f"compiled segment not used ({why}): running the Python path",
-                          stacklevel=4)
-            _warned = True
+        _warn_once(f"compiled segment not used ({why}): running the Python path")
         return None
     per_model = _models.setdefault(model, {})
     if not isinstance(per_model.get(sparse), CompiledModel):
@@ -313,7 +316,7 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None
     compiler and for the mechanisms it does not cover, quietly (:func:`build_later` builds
     it after a long run); with another scikit-sundae than the driver was written for,
     with one warning."""
-    global _driver_error, _warned
+    global _driver_error
     if mode is True:
         return for_model(model, sparse)
     if mode is False or _unsupported(model) is not None or _driver_error is not None:
@@ -323,9 +326,7 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None
             check_version()
         except OSError as e:
             _driver_error = str(e)
-            if not _warned:
-                warnings.warn(f"compiled segment not used ({e})", stacklevel=4)
-                _warned = True
+            _warn_once(f"compiled segment not used ({e})")
             return None
     per_model = _models.setdefault(model, {})
     got = per_model.get(sparse, _MISSING)
@@ -375,8 +376,7 @@ def build_later(model: Model, sparse: bool, mode: bool | str, used: CompiledMode
         warnings.warn(f"compiled=\"auto\": building the compiled segment of "
                       f"{model.mech.name!r} in the background (about {est:.1f} s; cached "
                       f"in {cache_dir()}); later runs of it use it (never: compiled=False, "
-                      "or --no-compiled)",
-                      CompileNotice, stacklevel=6)
+                      "or --no-compiled)", CompileNotice, stacklevel=6)
         _noticed = True
     if not _builds:
         atexit.register(_join)
