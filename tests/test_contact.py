@@ -481,9 +481,22 @@ def test_contact_from_a_file_runs_as_built_in_python(tmp_path):
     ('kind = "circle", radius = 0.04 }',
      'kind = "spline", points = [[0.04, 0.0], [0.0, -0.04], [-0.04, 0.0], [0.0, 0.04]] }',
      r"\[joints\.K\] curve\.points: expected the points counter-clockwise"),
+    ('kind = "circle", radius = 0.04 }',
+     'kind = "spline", closed = false, points = [[0.0, 0.04], [0.01, 0.05], [0.02, 0.04], '
+     '[0.03, 0.05]] }',
+     r"\[joints\.K\] curve\.closed: an open curve is for a bilateral contact"),
     ('kind = "circle", radius = 0.04 }\nunilateral = true',
-     'kind = "spline", points = [[0.04, 0.0], [0.0, 0.04], [-0.04, 0.0], [0.0, -0.04]] }',
-     r"\[joints\.K\] curve: a spline curve is for a unilateral contact"),
+     'kind = "spline", closed = false, points = [[0.0, 0.04], [0.02, 0.05], [0.01, 0.04], '
+     '[0.03, 0.05]] }',
+     r"\[joints\.K\] curve\.points: expected an open curve's points in increasing x"),
+    ('kind = "circle", radius = 0.04 }\nunilateral = true',
+     'kind = "spline", closed = false, points = [[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], '
+     '[0.3, 0.0]] }\nlimits = { upper = 0.31 }',
+     r"\[joints\.K\] limits: expected limits within the open curve's ends, 0 to 0\.3 m"),
+    ('kind = "circle", radius = 0.04 }',
+     'kind = "spline", closed = "no", points = [[0.04, 0.0], [0.0, 0.04], [-0.04, 0.0], '
+     '[0.0, -0.04]] }',
+     r"\[joints\.K\.curve\] closed: expected true or false, got 'no'"),
     ("unilateral = true", "unilateral = true\naxis = [1.0, 0.0]",
      r"\[joints\.K\] axis: only a prismatic joint has this key"),
 ])

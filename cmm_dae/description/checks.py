@@ -114,9 +114,11 @@ def validate(m: Any) -> list[Problem]:
             out.append(Problem(t, "", f"drives unknown joint '{name}' "
                                f"(joints: {', '.join(m.joints) or 'none'})"))
         elif m.joints[name].stops is not None:
-            out.append(Problem(t, "", f"joint '{name}' has "
-                               f"{'limits' if m.joints[name].limits else 'a unilateral contact'}"
-                               ": a driven joint cannot be metamorphic"))
+            jd = m.joints[name]
+            what = "limits" if jd.limits else "a unilateral contact" if jd.lands else \
+                "stops at its open curve's ends"
+            out.append(Problem(t, "", f"joint '{name}' has {what}: a driven joint cannot "
+                               "be metamorphic"))
         elif m.joints[name].friction is not None:
             out.append(Problem(t, "", f"joint '{name}' has friction: the driver would carry "
                                "it (put the friction on an undriven joint)"))

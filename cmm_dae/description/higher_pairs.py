@@ -39,7 +39,7 @@ def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str
                       r.num(f"{t}.curve", ct, "radius", default("joints", "radius", "curve")),
                       r.vec(f"{t}.curve", ct, "direction", 2,
                             default=default("joints", "direction", "curve")),
-                      tuple(tuple(x) for x in pts))
+                      tuple(tuple(x) for x in pts), _closed(r, f"{t}.curve", ct))
     elif jtype == "contact":
         r.bad(t, "curve", "missing (expected { kind = \"circle\", radius = R } or "
               "{ kind = \"line\", direction = [x, y] })")
@@ -51,6 +51,15 @@ def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str
             r.bad(t, "unilateral", f"expected true or false, got {unilateral!r:.40}")
             unilateral = False
     return curve, side, unilateral
+
+
+def _closed(r: Any, t: str, ct: dict) -> bool:
+    """A spline's ``closed`` key (true unless given false)."""
+    closed = ct.get("closed", True)
+    if not isinstance(closed, bool):
+        r.bad(t, "closed", f"expected true or false, got {closed!r:.40}")
+        return True
+    return closed
 
 
 def is_gear(d: Any) -> bool:

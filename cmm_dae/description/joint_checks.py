@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import Problem
+from .curves import spline
 
 GROUND = "ground"
 
@@ -105,14 +106,16 @@ def _friction_problems(t: str, j) -> list[Problem]:
     return out
 
 def _spline_problems(t: str, j) -> list[Problem]:
-    """A spline curve: at least 4 points, counter-clockwise once around its origin, none
-    at it; for a unilateral contact (its gap is radial)."""
+    """A spline curve: at least 4 finite points; closed, counter-clockwise once around its
+    origin and none at it; open, in increasing x, on a bilateral contact whose limits lie
+    within the curve's ends."""
     c = j.curve
-    if not j.unilateral:
-        return [Problem(t, "curve", "a spline curve is for a unilateral contact (a cam and "
-                        "its follower) in this version; a slot needs a circle or a line")]
     if len(c.points) < 4 or not all(_finite(x) for p in c.points for x in p):
         return [Problem(t, "curve.points", "expected at least 4 points [x, y] (m)")]
+    if not isinstance(c.closed, bool):
+        return [Problem(t, "curve.closed", f"expected true or false, got {c.closed!r}")]
+    if not c.closed:
+        return _open_spline_problems(t, j)
     ang, rad = c.polar()
     if np.min(rad) <= 0.0:
         return [Problem(t, "curve.points", "a point lies at the curve's origin (the first "
@@ -121,6 +124,28 @@ def _spline_problems(t: str, j) -> list[Problem]:
         return [Problem(t, "curve.points", "expected the points counter-clockwise once "
                         "around the curve's origin, each at a larger polar angle than the "
                         "one before")]
+    return []
+
+
+def _open_spline_problems(t: str, j) -> list[Problem]:
+    """An open spline: x increasing; a bilateral contact (its ends are stops); limits, if
+    any, within them."""
+    c = j.curve
+    if j.unilateral:
+        return [Problem(t, "curve.closed", "an open curve is for a bilateral contact (a pin "
+                        "in a slot) in this version: a point lifted off it could land beyond "
+                        "its ends; a unilateral contact needs a closed curve, a circle or a "
+                        "line")]
+    if not np.all(np.diff([x for x, _ in c.points]) > 0.0):
+        return [Problem(t, "curve.points", "expected an open curve's points in increasing "
+                        "x (the curve is y(x) in its first body's frame)")]
+    length = spline(c).length
+    lim = j.limits
+    if lim is not None and any(x is not None and _finite(x) and not 0.0 <= x <= length
+                               for x in (lim.lower, lim.upper)):
+        return [Problem(t, "limits", f"expected limits within the open curve's ends, 0 to "
+                        f"{length:.9g} m of arc length from its first point, got "
+                        f"lower = {lim.lower}, upper = {lim.upper}")]
     return []
 
 

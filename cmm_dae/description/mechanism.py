@@ -13,6 +13,7 @@ from typing import Literal
 
 from ..core.errors import ModelError, Problem
 from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
+from .curves import spline
 from .laws import Driver, Law, Zone
 from .parts import Curve, Damper, Friction, Gear, Limits, Spring
 
@@ -128,7 +129,7 @@ class Joint(_TwoPoints):
         to pull, lands again with ``restitution``); its coordinate is then its distance
         from the curve on its side (the gap, m, >= 0). A bilateral contact (a pin in a
         slot) keeps to the curve; its coordinate is the arc length (m), ``limits`` its
-        ends.
+        ends (an open spline's own ends by default).
     """
 
     name: str
@@ -167,8 +168,17 @@ class Joint(_TwoPoints):
     @property
     def stops(self) -> Limits | None:
         """Where the joint's coordinate meets a stop: its ``limits``, or for a unilateral
-        contact the curve itself (gap 0)."""
-        return Limits(lower=0.0) if self.lands else self.limits
+        contact the curve itself (gap 0); a bilateral contact on an open spline stops at
+        the curve's ends unless ``limits`` are given."""
+        if self.lands:
+            return Limits(lower=0.0)
+        c = self.curve
+        if self.limits is None and c is not None and c.kind == "spline" and not c.closed:
+            try:
+                return Limits(0.0, spline(c).length)
+            except ValueError:  # points out of order: the checks report the curve
+                return Limits(lower=0.0)
+        return self.limits
 
 
 @dataclass(frozen=True)

@@ -75,17 +75,22 @@ class Curve:
         measured counter-clockwise from the body's x axis, ``radius * atan2`` in
         (-pi radius, pi radius]. ``line``: through the origin point along ``direction``
         (normalised on use); its arc length is the distance along it from the origin.
-        ``spline``: a closed curve through ``points`` (m, relative to the origin point,
-        counter-clockwise once around it, each ray from it meeting the curve once): its
-        radius is the periodic cubic spline through the points' radii over their polar
-        angles (a cam profile); for unilateral contacts, whose gap is then the radial
-        distance ``|d| - r(angle of d)``.
+        ``spline``: a smooth curve through ``points`` (m, relative to the origin point).
+        Closed (``closed``, the default): counter-clockwise once around the origin, each
+        ray from it meeting the curve once; its radius is the periodic cubic spline
+        through the points' radii over their polar angles (a cam profile, a closed
+        groove). Open: the points in increasing x, the curve the cubic spline y(x) through
+        them (a curved slot or guide), its ends stops at arc lengths 0 and its length.
+        A spline's arc length is measured from its first point.
+    closed : bool
+        ``spline`` only: a closed curve (True) or an open one (False).
     """
 
     kind: Literal["circle", "line", "spline"] = "circle"
     radius: float = 0.0
     direction: Vec2 = (1.0, 0.0)
     points: tuple[Vec2, ...] = ()
+    closed: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", tuple(

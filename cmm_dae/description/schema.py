@@ -125,16 +125,21 @@ SPEC: dict[str, Table] = {
                          "kind": Key("choice", "circle (centred on the point; arc length "
                                      "radius atan2 from the body's x axis), line (through "
                                      "the point; arc length along `direction`) or spline "
-                                     "(a closed curve through `points`)",
+                                     "(a smooth curve through `points`, closed or open; "
+                                     "arc length from the first point)",
                                      choices=CURVES),
                          "radius": Key("number", "circle: radius", "m", minimum=0.0,
                                        default=0.0),
                          "direction": Key("vector2", "line: direction in the first body's "
                                           "frame", default=[1.0, 0.0]),
                          "points": Key("points", "spline: points [[x, y], ...] relative to "
-                                       "the first point, counter-clockwise once around "
-                                       "it (a cam profile; unilateral contacts)", "m",
-                                       default=[])},
+                                       "the first point: closed, counter-clockwise once "
+                                       "around it (a cam profile, a closed groove); open, "
+                                       "in increasing x (a curved slot)", "m",
+                                       default=[]),
+                         "closed": Key("boolean", "spline: a closed curve around the first "
+                                       "point (true) or an open one along x, whose ends "
+                                       "are stops (false)", default=True)},
                      default=None),
         "side": Key("choice", "contact only: the side of the curve the point keeps to (a "
                     "circle's outside or inside; left or right of a line's direction)",

@@ -11,16 +11,16 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND
 from . import reaction
+from .contact import contact_gap_arc
 from .laws import driver_expr, law_expr
 from .reaction import reacting
 
 __all__ = ["Constraints", "Forces", "Frame", "JointCoords", "Row", "applied_forces",
-           "constraint_rows", "contact_gap_arc", "names", "powers"]
+           "constraint_rows", "names", "powers"]
 
 
 @dataclass(frozen=True)
@@ -30,41 +30,6 @@ class Row:
 
     kind: str
     name: str
-
-
-def contact_gap_arc(j, d, theta1) -> tuple:
-    """A contact joint's gap (distance of the point from the curve on its ``side``, m) and
-    arc length (m) for ``d`` = point - curve origin (global, CasADi) and the first body's
-    angle ``theta1``. The gap is a distance, so its multiplier is the contact force (N)."""
-    dl = _rot(theta1).T @ d  # in the first body's frame, where the curve is given
-    c = j.curve
-    if c.kind == "circle":
-        r = ca.sqrt(ca.dot(dl, dl))
-        gap = r - c.radius
-        arc = c.radius * ca.atan2(dl[1], dl[0])
-    elif c.kind == "spline":  # radial gap to a periodic cubic spline r(angle)
-        arc = ca.atan2(dl[1], dl[0])  # its polar angle (a spline's contact is unilateral)
-        gap = ca.sqrt(ca.dot(dl, dl)) - _spline_radius(c, arc)
-    else:
-        u = np.array(c.direction, float) / math.hypot(*c.direction)
-        gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction
-        arc = u[0] * dl[0] + u[1] * dl[1]
-    return (gap if j.side == "outside" else -gap), arc
-
-
-def _spline_radius(c, phi):
-    """The periodic cubic spline through a spline curve's knots at the polar angle
-    ``phi`` (CasADi), piece by piece: the angle is brought into the knots' turn first
-    (the spline is C2 across the turn's ends, so the jump of the angle does not show)."""
-    ang, rad = c.polar()
-    spl = CubicSpline(ang, rad, bc_type="periodic")
-    x = ang[0] + ca.fmod(ca.fmod(phi - ang[0], 2 * math.pi) + 2 * math.pi, 2 * math.pi)
-    out = ca.SX(0)
-    for i in reversed(range(ang.size - 1)):  # the last piece first: nested from the end
-        s = x - ang[i]
-        piece = ((spl.c[0, i] * s + spl.c[1, i]) * s + spl.c[2, i]) * s + spl.c[3, i]
-        out = piece if i == ang.size - 2 else ca.if_else(x < ang[i + 1], piece, out)
-    return out
 
 
 def _rot(th):

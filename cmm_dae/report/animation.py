@@ -26,6 +26,8 @@ import numpy as np  # noqa: E402
 from PIL import Image  # noqa: E402  (matplotlib's own dependency)
 
 from ..core.errors import CmmError  # noqa: E402
+from ..description.curves import spline  # noqa: E402
+from ..description.parts import Curve  # noqa: E402
 from ..equations.gearing import pinion_radius, pitch_radius  # noqa: E402
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -122,6 +124,9 @@ class _Scene:
         if cv["kind"] == "circle":
             ang = np.linspace(0.0, 2.0 * math.pi, 73)
             local = o + cv["radius"] * np.column_stack([np.cos(ang), np.sin(ang)])
+        elif cv["kind"] == "spline":
+            local = o + spline(Curve("spline", points=tuple(map(tuple, cv["points"])),
+                                     closed=cv.get("closed", True))).sample()
         else:
             u = np.asarray(cv["direction"], float) / np.hypot(*cv["direction"])
             # the point's place along the line, read in the first body's frame

@@ -222,11 +222,12 @@ def _meta(model: Model) -> dict:
         "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
         # for drawings: guides of prismatic joints and the stops of metamorphic joints
         "axes": {n: list(j.axis) for n, j in mech.joints.items() if j.type == "prismatic"},
-        "limits": {n: [j.limits.lower, j.limits.upper] for n, j in mech.joints.items()
-                   if j.limits is not None},
+        "limits": {n: [j.stops.lower, j.stops.upper] for n, j in mech.joints.items()
+                   if j.stops is not None and not j.lands},
         # and the curves of contact joints, in their first body's frame
         "curves": {n: {"kind": j.curve.kind, "radius": j.curve.radius,
                        "direction": list(j.curve.direction), "side": j.side,
-                       "unilateral": j.unilateral}
+                       "unilateral": j.unilateral, "closed": j.curve.closed,
+                       "points": [list(x) for x in j.curve.points]}
                    for n, j in mech.joints.items() if j.type == "contact"},
     }
