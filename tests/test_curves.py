@@ -180,3 +180,89 @@ def test_cross_slide_in_a_closed_groove_against_lagrange():
     assert np.max(np.abs(ang - ref.sol(res.t)[0])) <= 1e-8
     assert np.max(np.abs(np.hypot(*xy.T) - S(np.mod(ang, 2 * math.pi)))) <= 1e-9
     assert np.max(np.abs(res.energy().residual)) <= 1e-8
+
+
+def _friction_reference(x0: float, mu: float, t_end: float):
+    """The cross-slide on y = f(x) with the slot's friction mu N against the pin's motion,
+    N the contact force: per state the pin's acceleration and N from the carriage's and
+    the slider's balances (linear once N > 0 is assumed; checked), to the first rest."""
+    f = CubicSpline(XS, YS)
+
+    def solve(x, xd):
+        d1, d2 = f(x, 1), f(x, 2)
+        w, s = math.sqrt(1 + d1 * d1), math.copysign(1.0, xd)
+        # (MC + MS) x'' + N (f' + mu s) / w = 0;  MS (f' x'' + f'' x'^2 + g) = N (1 - mu s f') / w
+        A = np.array([[MC + MS, (d1 + mu * s) / w], [MS * d1, -(1 - mu * s * d1) / w]])
+        xdd, N = np.linalg.solve(A, [0.0, -MS * (d2 * xd * xd + G)])
+        assert N > 0.0
+        return xdd, N
+
+    def rest(_t, z):
+        return z[1]
+    rest.terminal = True
+    rest.direction = -1  # it starts to the right, down the slope
+    return solve, solve_ivp(lambda _t, z: [z[1], solve(*z)[0]], (0.0, t_end),
+                            [x0, 1e-300], method="DOP853", rtol=1e-13, atol=1e-15,
+                            dense_output=True, events=rest, first_step=1e-6)
+
+
+@pytest.mark.timeout(120)
+def test_friction_in_a_spline_slot_from_its_contact_force():
+    """The cross-slide released at x = 0.25 m in the open slot with friction mu |N| (mu_k
+    0.15, mu_s 0.2; N the contact force): the pin's x within 1e-8 m of the reference that
+    solves the friction with the slot's force at every step, until it comes to rest, where
+    it sticks within 1e-8 s of the reference's rest; the audit books the friction's loss
+    within 1e-8 J. Measured: 7.8e-12 m, 8.4e-12 s, 7.4e-12 J."""
+    mu = 0.15
+    solve, ref = _friction_reference(0.25, mu, 3.0)
+    t_rest = ref.t_events[0][0]
+    f = CubicSpline(XS, YS)
+    mech = cross_slide(list(zip(XS, YS, strict=True)), False, _arc(f, 0.0, 0.25),
+                       guess=(0.25, -0.08))
+    k = mech.joints["K"]
+    mech = mech.replace(joints={**mech.joints, "K": cd.Joint(
+        "K", "contact", k.first, k.second, curve=k.curve,
+        friction=cd.Friction(mu_static=0.2, mu_kinetic=mu))})
+    res = cd.run_dae(mech, 3.0, rtol=1e-11, output_dt=0.01)
+    sticks = [e for e in res.events if e.kind == "stick"]
+    assert sticks and abs(sticks[0].t - t_rest) <= 1e-8
+    before = res.t < t_rest - 1e-6
+    assert np.max(np.abs(res.body("slider").pose[before, 0] - ref.sol(res.t[before])[0])) \
+        <= 1e-8
+    assert np.max(np.abs(res.energy().residual)) <= 1e-8
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("closed", [False, True])
+def test_spline_gap_and_arc_gradients_are_the_curves_normal_and_tangent(closed):
+    """At points on the curve the contact row's gradient is the unit normal (outward on a
+    closed curve, to the left of an open one) and the arc
+    coordinate's the unit tangent (scipy's derivatives of the same spline), within 1e-12:
+    so the row's multiplier is the contact force, and friction along the coordinate is
+    tangential (it would otherwise change the contact force it grows with)."""
+    if closed:
+        phi = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
+        r = 0.1 + 0.02 * np.cos(2 * phi) + 0.01 * np.sin(phi)
+        pts = list(zip(r * np.cos(phi), r * np.sin(phi), strict=True))
+        S = CubicSpline(np.append(phi, 2 * math.pi), np.append(r, r[0]), bc_type="periodic")
+        us = [0.2, 1.9, 3.5, 5.9]
+        place = [(S(u) * math.cos(u), S(u) * math.sin(u)) for u in us]
+        tang = [(S(u, 1) * math.cos(u) - S(u) * math.sin(u),
+                 S(u, 1) * math.sin(u) + S(u) * math.cos(u)) for u in us]
+    else:
+        pts = list(zip(XS, YS, strict=True))
+        f = CubicSpline(XS, YS)
+        us = [0.03, 0.2, 0.37, 0.58]
+        place = [(u, f(u)) for u in us]
+        tang = [(1.0, f(u, 1)) for u in us]
+    model = cd.Model(cross_slide(pts, closed, 0.01, guess=place[0]))
+    row = model.rows_of("joint", "K")[0]
+    p = model.params()
+    for (x, y), (tx, ty) in zip(place, tang, strict=True):
+        t = np.array([tx, ty]) / math.hypot(tx, ty)
+        q = np.array([x, 0.0, 0.0, x, y, 0.0])
+        c_q = model.joint_coords(q, np.zeros(6)).c_q[model.jidx["K"], 3:5]
+        n_q = model.constraints(q, 0.0, p).Phi_q[row, 3:5]
+        assert np.max(np.abs(c_q - t)) <= 1e-12
+        n = np.array([t[1], -t[0]]) if closed else np.array([-t[1], t[0]])  # out; left
+        assert np.max(np.abs(n_q - n)) <= 1e-12

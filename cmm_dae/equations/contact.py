@@ -42,7 +42,8 @@ def _spline_gap_arc(cv, dl) -> tuple:
     periodic spline is C2 across its ends, so the angle's jump does not show in the gap;
     the arc length restarts at the first point), the gap ``(|dl| - r) r / sqrt(r^2 +
     r'^2)``. Open: the parameter is x (the first and last pieces extend past the ends,
-    which are stops), the gap ``(y - f(x)) / sqrt(1 + f'^2)``."""
+    which are stops), the gap ``(y - f(x)) / sqrt(1 + f'^2)``. On the curve the gap's
+    gradient is the unit normal and the arc length's the unit tangent."""
     sp = spline(cv)
     k = sp.knots
     if sp.closed:
@@ -57,7 +58,11 @@ def _spline_gap_arc(cv, dl) -> tuple:
         val, slope = sp.piece(i, s)
         speed = sp.speed(val, slope)
         g = (rho - val) * val / speed if sp.closed else (dl[1] - val) / speed
-        a = sp.arc[i] + sp.piece_arc(i, s)
+        # the arc length plus a multiple of the gap (zero on the curve) that makes its
+        # gradient there the unit tangent: s(u)'s own gradient has a normal part
+        # (-r'/r or -f' of the unit normal), through which a force along the coordinate
+        # (friction, a spring, a load) would change the contact force
+        a = sp.arc[i] + sp.piece_arc(i, s) + (slope / val if sp.closed else slope) * g
         if gap is None:
             gap, arc = g, a
         else:
