@@ -159,6 +159,9 @@ class HybridState:
     def _mode(self, locked: Locked, zones, slip) -> tuple:
         zones = self.zones if zones is None else zones
         slip = self.slip if slip is None else slip
+        # a locked joint does not slip: a trial lock of a slipping joint (is the stop it
+        # reaches at rest going to hold it?) must not keep its kinetic friction
+        slip = {j: s for j, s in slip.items() if j not in locked}
         return (tuple((j, s, self.limit_value(j, s)) for j, s in sorted(locked.items())),
                 tuple(sorted(zones)), tuple(sorted(slip.items())))
 
