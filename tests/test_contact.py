@@ -469,8 +469,6 @@ def test_contact_from_a_file_runs_as_built_in_python(tmp_path):
      "or false"),
     ("unilateral = true", "unilateral = true\nlimits = { lower = 0.0 }",
      r"\[joints\.K\] limits: a unilateral contact's stop is its curve"),
-    ("unilateral = true", "unilateral = true\nfriction = { kinetic = 0.1, static = 0.1 }",
-     r"\[joints\.K\] friction: friction in a unilateral contact is not supported yet"),
     ('connects = ["ground.O", "cam.O"]', 'connects = ["ground.O", "cam.O"]\nside = "inside"',
      r"\[joints\.A\] side: only a contact joint has this key"),
     ("unilateral = true", 'unilateral = true\nside = "above"',

@@ -174,9 +174,6 @@ def _contact_problems(t: str, j) -> list[Problem]:
     if j.unilateral and j.limits is not None:
         out.append(Problem(t, "limits", "a unilateral contact's stop is its curve (it lands "
                            "on it); limits on the arc length need a bilateral contact"))
-    if j.friction is not None and j.unilateral:
-        out.append(Problem(t, "friction", "friction in a unilateral contact is not supported "
-                           "yet (a bilateral one, a pin in a slot, can have it)"))
     return out
 
 

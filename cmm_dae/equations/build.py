@@ -7,7 +7,7 @@ calls them in this order and keeps what they build; each sets the model attribut
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -19,8 +19,12 @@ from .contact import contact_gap_arc
 from .laws import driver_expr, law_expr
 from .reaction import reacting
 
-__all__ = ["Constraints", "Forces", "Frame", "JointCoords", "Row", "applied_forces",
+__all__ = ["SLIDE", "Constraints", "Forces", "Frame", "JointCoords", "Row", "applied_forces",
            "constraint_rows", "names", "powers"]
+
+
+#: the suffix of a frictional unilateral contact's slide ("K:slide")
+SLIDE = ":slide"
 
 
 @dataclass(frozen=True)
@@ -50,7 +54,8 @@ class Constraints:
 @dataclass(frozen=True)
 class JointCoords:
     """Joint coordinates ``c`` (nj,) in rad or m, their rates ``cdot`` (nj,) and the
-    Jacobian ``c_q`` (nj, nq), in the order of ``Model.joint_names``."""
+    Jacobian ``c_q`` (nj, nq), in the order of ``Model.joint_names`` and then of the
+    slides (``Model.slides``: arc lengths of unilateral contacts with friction)."""
 
     c: np.ndarray
     cdot: np.ndarray
@@ -64,12 +69,25 @@ def names(mdl, mech) -> None:
     mdl.body_names = list(mech.bodies)
     mdl.joint_names = list(mech.joints)
     mdl.driver_names = list(mech.drivers)
-    #: joints with a lock row: on a stop (limits) or sticking (friction)
-    mdl.locks = mech.lockable_joints
+    #: the slides of unilateral contacts with friction: "K:slide" -> "K". A slide is a
+    #: coordinate of its own (the arc length, after the joints' in ``c``) that slips or
+    #: sticks while its contact touches; the contact's own coordinate is its gap.
+    mdl.slides = {f"{n}{SLIDE}": n for n, j in mech.joints.items()
+                  if j.lands and j.friction is not None}
+    of = {k: s for s, k in mdl.slides.items()}
+    #: the records the event policy and the equations read by lock name: the joints (a
+    #: contact with a slide without its friction) and the slides (bilateral, the friction)
+    mdl.joints, mdl.sjoints = ({**{n: replace(j, friction=None) if n in of else j
+                                   for n, j in m.joints.items()},
+                                **{s: replace(m.joints[k], name=s, unilateral=False)
+                                   for s, k in mdl.slides.items()}}
+                               for m in (mech, mdl.smech))
+    #: joints with a lock row: on a stop (limits) or sticking (friction), then the slides
+    mdl.locks = mech.lockable_joints + list(mdl.slides)
     #: joints with dry friction, in the order of their slip directions in ``p``
-    mdl.frictional = mech.frictional_joints
+    mdl.frictional = [of.get(n, n) for n in mech.frictional_joints]
     #: frictional joints whose levels grow with their reaction (equations.reaction)
-    mdl.reacting = reacting(mech)
+    mdl.reacting = [of.get(n, n) for n in reacting(mech)]
     nb = len(mdl.body_names)
     mdl.nq = 3 * nb
     mdl.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
@@ -123,6 +141,7 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
     angle, point = fr.angle, fr.point
     nl = len(mdl.locks)
     coords = []
+    arcs = {}  # the unilateral contacts' arc lengths (their slides' coordinates)
     rows: list[ca.SX] = []
     mdl.rows: list[Row] = []
     for name, j in mech.joints.items():
@@ -140,11 +159,12 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
         else:  # a contact: the gap is its row (bilateral) or its coordinate's stop
             gap, arc = contact_gap_arc(smech.joints[name], d, angle(j.first_body))
             coords.append(gap if j.unilateral else arc)
+            arcs[name] = arc
             jrows = [] if j.unilateral else [gap]
         rows += jrows
         mdl.rows += [Row("joint", name)] * len(jrows)
-    c = ca.vertcat(*coords)
-    jidx = {n: i for i, n in enumerate(mdl.joint_names)}
+    c = ca.vertcat(*coords, *[arcs[k] for k in mdl.slides.values()])
+    jidx = {n: i for i, n in enumerate(mdl.joint_names + list(mdl.slides))}
     mdl.jidx = jidx
     # Gear pairs: two joints' coordinates in a fixed ratio (one row each, a joint row
     # in all but its label: it may be redundant, e.g. in a closed gear train)
@@ -230,7 +250,7 @@ def applied_forces(mdl, fr: Frame, c, c_q, cdot, lam) -> Forces:
     # smooth within a configuration and its switches are events.
     for f, name in enumerate(mdl.frictional):
         k = jidx[name]
-        Qf -= c_q[k, :].T * (smech.joints[name].friction.kinetic * p[2 * nl + nz + f])
+        Qf -= c_q[k, :].T * (mdl.sjoints[name].friction.kinetic * p[2 * nl + nz + f])
     # Kinetic friction from the reaction (equations.reaction): a function of the
     # multipliers, so it is kept apart from Qf; IDA's residual has it with its own
     # multipliers, the KKT solves add it by Newton's method.
@@ -238,12 +258,13 @@ def applied_forces(mdl, fr: Frame, c, c_q, cdot, lam) -> Forces:
     for f, name in enumerate(mdl.frictional):
         if name not in mdl.reacting:
             continue
-        if len(mdl.rows_of("joint", name)) != mech.joints[name].rows:
+        if name not in mdl.slides and len(mdl.rows_of("joint", name)) != \
+                mech.joints[name].rows:
             raise ModelError(Problem(
                 f"joints.{name}", "friction", "grows with the joint's reaction, but "
                 "its constraint rows are redundant and leave the reaction undetermined; "
                 "use constant friction levels (static, kinetic) there"))
-        grows = reaction.growth(mdl, name, lam, "kinetic", smech.joints[name].friction)
+        grows = reaction.growth(mdl, name, lam, "kinetic", mdl.sjoints[name].friction)
         Qr -= c_q[jidx[name], :].T * (grows * p[2 * nl + nz + f])
 
     Qf, load_val, load_pow = _loads(mdl, fr, c_q, cdot, Qf)
@@ -292,7 +313,7 @@ def powers(mdl, fr: Frame, lam, Phi_t, cdot, f: Forces):
         diss += el.damping * rate**2
     fric = ca.SX(0)
     for f, name in enumerate(mdl.frictional):
-        kin = reaction.level(mdl, name, lam, "kinetic", smech.joints[name].friction)
+        kin = reaction.level(mdl, name, lam, "kinetic", mdl.sjoints[name].friction)
         fric += kin * p[2 * nl + nz + f] * cdot[jidx[name]]
     powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
                         diss, fric)

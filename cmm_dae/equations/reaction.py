@@ -40,8 +40,11 @@ def reacting(mech: Any) -> list[str]:
 
 def _rows(model: Any, joint: str) -> list[int]:
     """The rows whose multipliers make the reaction friction grows with: a revolute
-    joint's two, a prismatic joint's normal one, a contact's one."""
-    j = model.mech.joints[joint]
+    joint's two, a prismatic joint's normal one, a contact's one (a unilateral contact's
+    lock row, for its slide: zero while the contact is open)."""
+    if joint in model.slides:  # a unilateral contact's slide: its contact's lock row
+        return [model.n_fixed + model.locks.index(model.slides[joint])]
+    j = model.joints[joint]
     rows = model.rows_of("joint", joint)
     if len(rows) != j.rows:  # (the model refuses this when it is built)
         raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not {j.rows}")
@@ -60,17 +63,17 @@ def magnitude(model: Any, joint: str, lam: Any) -> Any:
 def arm(model: Any, joint: str, friction: Any = None) -> Any:
     """What mu multiplies besides the reaction: the pin's radius on a revolute joint (m),
     1 on a prismatic or contact one. ``friction`` (default the joint's) may hold symbols."""
-    f = model.mech.joints[joint].friction if friction is None else friction
-    return f.radius if model.mech.joints[joint].type == "revolute" else 1.0
+    f = model.joints[joint].friction if friction is None else friction
+    return f.radius if model.joints[joint].type == "revolute" else 1.0
 
 
 def growth(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> Any:
     """The part of the ``kind`` ("static" or "kinetic") level of ``joint`` that grows with
     the reaction, mu times the reaction's magnitude times :func:`arm` (N or N m; 0 for
     constant friction). ``friction`` (default the joint's) may hold symbols."""
-    if not model.mech.joints[joint].friction.from_reaction:
+    if not model.joints[joint].friction.from_reaction:
         return 0.0
-    f = model.mech.joints[joint].friction if friction is None else friction
+    f = model.joints[joint].friction if friction is None else friction
     mu = f.mu_static if kind == "static" else f.mu_kinetic
     return mu * arm(model, joint, f) * magnitude(model, joint, lam)
 
@@ -79,9 +82,9 @@ def level(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> 
     """The ``kind`` ("static" or "kinetic") friction level of ``joint`` (N or N m) with the
     multipliers ``lam``: the constant level plus :func:`growth`. ``friction`` (default the
     joint's) may hold symbols."""
-    f = model.mech.joints[joint].friction if friction is None else friction
+    f = model.joints[joint].friction if friction is None else friction
     const = f.static if kind == "static" else f.kinetic
-    if not model.mech.joints[joint].friction.from_reaction:
+    if not model.joints[joint].friction.from_reaction:
         return const
     return const + growth(model, joint, lam, kind, f)
 
@@ -111,7 +114,7 @@ def solve(model: Any, q: np.ndarray, v: np.ndarray, p: np.ndarray, Phi_q: np.nda
     c_q = None
     for name in model.reacting:
         s = p[model.slip_slot(name)]
-        f = model.mech.joints[name].friction
+        f = model.joints[name].friction
         if s != 0.0 and f.mu_kinetic > 0.0:
             if c_q is None:
                 c_q = model.joint_coords(q, v).c_q

@@ -42,6 +42,9 @@ from .state import (
     joint_acceleration,
     joint_rate,
     over_constrained,
+    slide_of,
+    without,
+    zeno,
 )
 from .zones import _zone_margin, initial_zones, pick, zone_switch
 
@@ -73,12 +76,14 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
             kind = TK.SLIP if locked[name] == Side.STICK else TK.PUSH
             out.append(Trigger(name, Side(locked[name]), kind))
             continue
-        lim = model.mech.joints[name].stops
+        if name in model.slides and model.slides[name] not in locked:
+            continue  # a contact's slide slips only while the contact touches
+        lim = model.joints[name].stops
         if lim is not None and lim.lower is not None:
             out.append(Trigger(name, Side.LOWER, TK.GAP))
         if lim is not None and lim.upper is not None:
             out.append(Trigger(name, Side.UPPER, TK.GAP))
-        if model.mech.joints[name].friction is not None:
+        if model.joints[name].friction is not None:
             out.append(Trigger(name, Side.NONE, TK.RATE))  # a slipping joint's rate
     return out
 
@@ -268,32 +273,6 @@ def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joi
     return out
 
 
-def zeno(times: list[float], t: float, e: float, resolution: float) -> bool:
-    """Have the bounces of a joint (at ``times``, now ``t``) reached the integrator's time
-    resolution? Then the joint locks instead of bouncing on.
-
-    Under a steady load the intervals between bounces shrink by the restitution ``e`` each
-    time and sum to a finite rest time (Zeno). Two rules end them:
-
-    * a bounce closer than ``resolution`` to the previous one;
-    * an interval that no longer shrinks (above ``(1 + e) / 2`` of the previous one) while
-      within ``2 / (1 - e) + 4`` resolutions: a fixed-step explicit scheme catches each
-      crossing up to a step late, gains about ``a dt`` of speed per bounce and settles into
-      a cycle of about ``2 e / (1 - e) + 2`` steps instead of coming to rest. Locking there
-      leaves O(resolution) of the exact accumulation time, so the rest time converges as
-      the step shrinks.
-    """
-    if not times:
-        return False
-    gap = t - times[-1]
-    if gap < resolution:
-        return True
-    if len(times) < 2 or e >= 1.0:
-        return False
-    prev = times[-1] - times[-2]
-    return gap <= (2.0 / (1.0 - e) + 4.0) * resolution and gap > 0.5 * (1.0 + e) * prev
-
-
 def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str, side: str,
              policy: Policy) -> list[Transition]:
     """Apply the impact map when ``joint`` reaches its ``side`` limit at time t.
@@ -318,7 +297,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     q = project_positions(model, q, t, p_locked)  # clamp onto the stop
     before = hs.current()
     cdm = joint_rate(model, q, v, joint)
-    e = model.mech.joints[joint].restitution
+    e = model.joints[joint].restitution
     T_minus = 0.5 * np.sum(model.mass * v**2)
     row = model.n_fixed + model.locks.index(joint)
     v_plus, imp = impact_map(model, q, v, t, p_locked, row, -e * cdm)
@@ -327,18 +306,23 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     bounce = e > 0 and abs(cdp) > policy.v_lock and \
         not zeno(hs.bounces.get(joint, []), t, e, policy.resolution) and \
         (gap == 0.0 or _rise(hs, q, v_plus, t, joint, side, cdp) > gap)
+    slide = slide_of(model, joint)
     if not bounce:
         v_plus, imp = impact_map(model, q, v, t, p_locked, row, 0.0)
         cdp = 0.0
         hs.locked = target
         hs.slip = {j: s for j, s in hs.slip.items() if j != joint}  # on the stop: no slip
         hs.bounces.pop(joint, None)
+        if slide is not None:  # landed: its slide slips the way it moves (a frictionless
+            rate = joint_rate(model, q, v_plus, slide)  # impact), or is decided below
+            if abs(rate) > policy.v_lock:
+                hs.slip = {**hs.slip, slide: 1 if rate > 0 else -1}
     else:
         hs.bounces.setdefault(joint, []).append(t)
         if joint in hs.slip:  # it slides back the other way
             hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
-    kind = EventKind.BOUNCE if bounce else EventKind.LANDING if model.mech.joints[joint].lands \
+    kind = EventKind.BOUNCE if bounce else EventKind.LANDING if model.joints[joint].lands \
         else EventKind.LOCK if abs(cdm) <= policy.v_lock else EventKind.LIMIT
     out.append(Transition(Event(t=t, kind=kind, joint=joint, side=side, before=before,
                                 after=hs.current(), velocity_before=cdm, velocity_after=cdp,
@@ -347,6 +331,8 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         force = hs.lock_force(q, v_plus, t, joint)
         if force < 0.0:  # the stop would have to pull at once: no chattering
             out.append(Transition(release(hs, q, v_plus, t, joint, force), q, v_plus))
+        elif slide is not None and slide not in hs.slip:  # landed at rest along the curve
+            out.append(stick_or_slip(hs, q, v_plus, t, slide))
     return out
 
 
@@ -364,14 +350,16 @@ def release(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
     """Unlock ``joint`` at time t; the event carries the lock force at release. A joint
     with friction leaves slipping in direction ``away``."""
     before = hs.current()
-    locked = dict(hs.locked)
-    side = locked.pop(joint)
-    hs.locked = locked
+    side = hs.locked[joint]
+    hs.locked = without(hs.model, hs.locked, joint)  # a contact's slide goes with it
+    slide = slide_of(hs.model, joint)
     hs.stick_at.pop(joint, None)
-    if hs.model.mech.joints[joint].friction is not None:
+    hs.stick_at.pop(slide, None)
+    hs.slip = {j: s for j, s in hs.slip.items() if j != slide}
+    if hs.model.joints[joint].friction is not None:
         hs.slip = {**hs.slip, joint: away}
     cdv = joint_rate(hs.model, q, v, joint)
-    kind = EventKind.LIFT_OFF if hs.model.mech.joints[joint].lands else EventKind.RELEASE
+    kind = EventKind.LIFT_OFF if hs.model.joints[joint].lands else EventKind.RELEASE
     return Event(t=t, kind=kind, joint=joint, side=side, before=before,
                  after=hs.current(), velocity_before=cdv, velocity_after=cdv,
                  release_force=float(force))
@@ -385,7 +373,7 @@ def would_reenter(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     only an acceleration into the stop above round-off level (relative to the bodies'
     accelerations) counts; a single lock can never re-enter (complementarity).
     """
-    free = {j: s for j, s in hs.locked.items() if j != joint}
+    free = without(hs.model, hs.locked, joint)
     acc, amax = joint_acceleration(hs, q, v, t, joint, free)
     into = -acc if side == "lower" else acc
     return into > 1e-9 * (1.0 + amax)

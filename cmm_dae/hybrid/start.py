@@ -227,8 +227,9 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
             events.append(Event(t=t0, kind=EventKind.LOCK, joint=name, side=side, before=before,
                                 after=hs.current()))
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
-        if name in hs.locked:
-            continue
+        if name in hs.locked or (name in model.slides and model.slides[name] not in
+                                 hs.locked):
+            continue  # (a contact's slide only while the contact touches)
         k = model.jidx[name]
         if cd0[k] != 0.0:
             hs.slip = {**hs.slip, name: 1 if cd0[k] > 0 else -1}

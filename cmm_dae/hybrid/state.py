@@ -1,6 +1,7 @@
 """The state of a hybrid run: which joints are locked (and how), which loads act in their
 zones, which joints slip; the registry of configurations met; the records the event policy
-passes around (:class:`Trigger`, :class:`Transition`, :class:`Policy`).
+passes around (:class:`Trigger`, :class:`Transition`, :class:`Policy`); the queries the
+policy asks of a lock set (a contact's slide, the Zeno rule, lock forces).
 
 Lock sets are values: a trial set is an argument of the function that asks, never an edit
 of the shared state undone afterwards.
@@ -19,6 +20,7 @@ import numpy as np
 from ..core.errors import SolverError, Status
 from ..core.records import Configuration, Event, Side
 from ..equations import rank, reaction
+from ..equations.build import SLIDE
 from ..equations.model import Model
 
 #: Consecutive bounces of one joint closer than this in time end in a lock (Zeno guard), s;
@@ -153,7 +155,7 @@ class HybridState:
     def limit_value(self, joint: str, side: str) -> float:
         if side == "stick":
             return self.stick_at[joint]
-        lim = self.model.mech.joints[joint].stops
+        lim = self.model.joints[joint].stops
         return lim.lower if side == "lower" else lim.upper
 
     def _mode(self, locked: Locked, zones, slip) -> tuple:
@@ -217,7 +219,7 @@ class HybridState:
     def static(self, joint: str, lam: Any = None) -> Any:
         """Static friction limit of a joint (0 without friction), N or N m; with friction
         from the reaction, at the multipliers ``lam`` (numbers or CasADi symbols)."""
-        f = self.model.mech.joints[joint].friction
+        f = self.model.joints[joint].friction
         if f is None:
             return 0.0
         if f.from_reaction and lam is not None:
@@ -233,6 +235,45 @@ class HybridState:
 
 
 # ------------------------------------------------------------------- queries
+def zeno(times: list[float], t: float, e: float, resolution: float) -> bool:
+    """Have the bounces of a joint (at ``times``, now ``t``) reached the integrator's time
+    resolution? Then the joint locks instead of bouncing on.
+
+    Under a steady load the intervals between bounces shrink by the restitution ``e`` each
+    time and sum to a finite rest time (Zeno). Two rules end them:
+
+    * a bounce closer than ``resolution`` to the previous one;
+    * an interval that no longer shrinks (above ``(1 + e) / 2`` of the previous one) while
+      within ``2 / (1 - e) + 4`` resolutions: a fixed-step explicit scheme catches each
+      crossing up to a step late, gains about ``a dt`` of speed per bounce and settles into
+      a cycle of about ``2 e / (1 - e) + 2`` steps instead of coming to rest. Locking there
+      leaves O(resolution) of the exact accumulation time, so the rest time converges as
+      the step shrinks.
+    """
+    if not times:
+        return False
+    gap = t - times[-1]
+    if gap < resolution:
+        return True
+    if len(times) < 2 or e >= 1.0:
+        return False
+    prev = times[-1] - times[-2]
+    return gap <= (2.0 / (1.0 - e) + 4.0) * resolution and gap > 0.5 * (1.0 + e) * prev
+
+
+def slide_of(model: Model, joint: str) -> str | None:
+    """The slide of a unilateral contact with friction (``"K:slide"``), or None."""
+    name = joint + SLIDE
+    return name if name in model.slides else None
+
+
+def without(model: Model, locked: Locked, joint: str) -> dict[str, str]:
+    """Lock set ``locked`` without ``joint`` and, for a contact, its slide (a slide holds
+    only while its contact touches)."""
+    slide = slide_of(model, joint)
+    return {j: s for j, s in locked.items() if j not in (joint, slide)}
+
+
 def over_constrained(hs: HybridState, locked: Locked, q: np.ndarray, t: float) -> bool:
     """True when the active constraint rows of lock set ``locked`` are dependent at q."""
     p = hs.params_of(locked)

@@ -50,6 +50,9 @@ class Layout:
         Joint -> its two points ("body.point").
     axes, limits, curves : dict
         Prismatic joints' guides, joints' (lower, upper) limits, contact joints' curves.
+    slides : dict
+        Unilateral contact with friction -> the column of its slide (its arc length) in
+        the coordinate series; its friction is the slide's.
     """
 
     mechanism: str = ""
@@ -76,6 +79,7 @@ class Layout:
     axes: dict[str, tuple[float, float]] = field(default_factory=dict)
     limits: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     curves: dict[str, dict[str, Any]] = field(default_factory=dict)
+    slides: dict[str, int] = field(default_factory=dict)
 
     @classmethod
     def of(cls, meta: dict[str, Any]) -> Layout:

@@ -149,7 +149,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
         nj, ne, nld = (len(model.joint_names), len(model.element_names),
                        len(model.load_names))
         ser = {"a": np.zeros((0, model.nq)), "lam": np.zeros((0, len(model.all_rows))),
-               "c": np.zeros((0, nj)), "cd": np.zeros((0, nj)), "cdd": np.zeros((0, nj)),
+               **{k: np.zeros((0, len(model.jidx))) for k in ("c", "cd", "cdd")},
                "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
                "gforce": np.zeros((0, len(model.mech.gears), 2)),
                "effort": np.zeros((0, len(model.driver_names))),
@@ -160,12 +160,12 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
     nj = len(model.joint_names)
     # Friction each joint carries (along +c, N or N m): the kinetic force while slipping,
     # the lock's force while stuck, and on a stop the part the stop could not give (a pull).
-    friction = np.zeros((n, nj))
+    friction = np.zeros((n, len(model.jidx)))  # (a contact's slide in its own column)
     # the multipliers of the rows in the equations (lam holds every row's once redundant
     # ones are shared out): the reactions friction grows with
     kept = lam[:, [i for i in range(len(model.all_rows)) if i not in model.dropped]].T
     for name in model.frictional:
-        k = model.joint_names.index(name)
+        k = model.jidx[name]
         fk = level(model, name, kept, "kinetic") if n else 0.0
         s = P[:, model.slip_slot(name)] if n else np.zeros(0)
         row = model.n_base + model.locks.index(name)
@@ -215,7 +215,9 @@ def _meta(model: Model) -> dict:
         "loads": model.load_names,
         # gear pairs by name: their joints and ratio (drawings)
         "gears": {n: [g.first, g.second, g.ratio] for n, g in mech.gears.items()},
-        "frictional": model.frictional,
+        "frictional": [model.slides.get(n, n) for n in model.frictional],
+        # unilateral contacts with friction: the column of their slide's coordinate
+        "slides": {k: model.jidx[s] for s, k in model.slides.items()},
         "body_points": {n: {k: list(v) for k, v in b.points.items()}
                         for n, b in mech.bodies.items()},
         "ground": {k: list(v) for k, v in mech.ground.items()},

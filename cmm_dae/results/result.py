@@ -202,7 +202,8 @@ class Result:
         """Time series of joint ``name``."""
         k = self._index("joints", name)
         d = self.data
-        fr = d["friction"][:, k] if "friction" in d else np.zeros(self.t.size)
+        fr = d["friction"][:, self.layout.slides.get(name, k)] if "friction" in d \
+            else np.zeros(self.t.size)  # (a contact's friction: its slide's)
         return JointSeries(d["c"][:, k], d["cd"][:, k], d["cdd"][:, k], d["jforce"][:, k, :],
                            d["jtorque"][:, k], fr)
 

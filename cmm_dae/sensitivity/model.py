@@ -71,8 +71,9 @@ class Equations:
         self.imp = _Mat(ca.Function("simp", [q, vm, t, p, th, erow, tgt, z], [dn(K)] + [
             dn(ca.jacobian(Ri, x)) for x in (q, vm, t, p, th, tgt)]))
         # the rebound target -e c'_k of a joint (onehot over joints)
-        onehot = ca.SX.sym("oh", len(model.joint_names))
-        e = ca.vertcat(*[j.restitution for j in model.smech.joints.values()])
+        onehot = ca.SX.sym("oh", len(model.jidx))  # (the slides' restitution: none)
+        e = ca.vertcat(*[j.restitution for j in model.smech.joints.values()],
+                       *[0.0 for _ in model.slides])
         target = -ca.dot(onehot, e) * ca.dot(onehot, sy["cdot"])
         self.tgt = _Mat(ca.Function("stgt", [q, v, th, onehot], [target] + [
             dn(ca.jacobian(target, x)) for x in (q, v, th)]))
@@ -152,14 +153,14 @@ class _SymbolicState(HybridState):
     def limit_value(self, joint: str, side: str):
         if side == "stick":
             return self.stick_at[joint]
-        lim = self.model.smech.joints[joint].stops
+        lim = self.model.sjoints[joint].stops
         return lim.lower if side == "lower" else lim.upper
 
     def static(self, joint: str, lam=None):
-        f = self.model.smech.joints[joint].friction
+        f = self.model.sjoints[joint].friction
         if f is None:
             return 0.0
-        if lam is not None and self.model.mech.joints[joint].friction.from_reaction:
+        if lam is not None and self.model.joints[joint].friction.from_reaction:
             return reaction.level(self.model, joint, lam, "static", friction=f)
         return f.static
 

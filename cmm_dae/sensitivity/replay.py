@@ -261,7 +261,7 @@ class SensitivityPass(CrossingPass):
         else:
             p_lock = p_before.copy()
             p_lock[k] = 1.0
-            stops = model.mech.joints[j].stops
+            stops = model.joints[j].stops
             p_lock[nl + k] = stops.lower if e.side == "lower" else stops.upper
             self.dL[j] = self.unit(f"joints.{j}.limits.{e.side}")
         dPl = dP_before.copy()
@@ -277,7 +277,7 @@ class SensitivityPass(CrossingPass):
         row = model.n_fixed + k
         erow = np.zeros(model.m)
         erow[row] = 1.0
-        oh = np.zeros(len(model.joint_names))
+        oh = np.zeros(len(model.jidx))
         oh[jk] = 1.0
         if e.kind == "bounce":
             tgt, t_q, t_v, t_th = eq.tgt(q, vm, self.th, oh)
