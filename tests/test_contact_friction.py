@@ -153,3 +153,17 @@ def test_slider_lifts_off_a_hump_with_friction():
     assert np.max(np.abs(res.joint("X").position[before] - ref.sol(res.t[before])[0])) \
         <= 1e-8
     assert np.max(np.abs(res.energy().residual)) <= 1e-8
+
+
+@pytest.mark.timeout(120)
+def test_slider_dropped_straight_down_lands_and_sticks_at_one_instant():
+    """Dropped with no speed along the floor: the landing and the slide's stick at one
+    instant, sqrt(2h/g) within 1e-9 s, on both integrators (fixed-step within 2e-3 s)."""
+    mech = cross_slide(FLOOR, cd.Friction(mu_static=0.4, mu_kinetic=0.3), 0.0, H, 0.0)
+    t1 = math.sqrt(2 * H / G)
+    for res, tol in ((cd.run_dae(mech, 0.5, rtol=1e-10), 1e-9),
+                     (cd.run_iterative(mech, 0.5, dt=1e-4), 2e-3)):
+        assert [(e.kind, e.joint) for e in res.events] == [("landing", "K"),
+                                                           ("stick", "K:slide")]
+        assert res.events[0].t == res.events[1].t and abs(res.events[0].t - t1) <= tol
+        assert res.configurations[res.events[1].after].locked == ("K", "K:slide")
