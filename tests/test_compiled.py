@@ -250,7 +250,10 @@ def test_post_processing_in_c_gives_the_same_series():
     """With the compiled segment, post-processing's and the screen's mapped functions run
     in C too (equations.compiled): on the same (Python-path) run, every force, torque,
     effort, multiplier, acceleration and drift series of the double-folded cycle within
-    1e-12 relative of CasADi's own evaluation, and the same events."""
+    1e-12 relative of CasADi's own evaluation, and the same events. The accelerations
+    within 1e-10 (measured 8.2e-12): in C the Schur complement is solved by CasADi's QR,
+    on the virtual machine by LAPACK's LU (backward errors 3.4e-17 and 6.8e-18; the
+    multipliers' difference, 1.7e-13 of the largest, grows through M^-1 Phi_q^T)."""
     from cmm_dae.equations import compiled
 
     mech = cd.load(cd.example("double_folded"))
@@ -263,7 +266,8 @@ def test_post_processing_in_c_gives_the_same_series():
     _same(a, b, {})
     for key in ("jforce", "jtorque", "effort", "lam", "a", "drift_pos", "drift_vel"):
         x, y = a.data[key], b.data[key]
-        assert np.max(np.abs(x - y)) <= 1e-12 * max(np.max(np.abs(x)), 1e-300), key
+        tol = 1e-10 if key == "a" else 1e-12
+        assert np.max(np.abs(x - y)) <= tol * max(np.max(np.abs(x)), 1e-300), key
     fast = cd.Model(mech)
     assert cd.run_dae(mech, 1.0, model=fast, compiled=True).meta["compiled"]
     assert fast.outputs_compiled

@@ -29,7 +29,7 @@ __all__ = ["MAPPED", "SINGLE", "use_compiled"]
 
 #: The model's attributes so replaced, and the names of their CasADi functions.
 MAPPED = {"outputs_fn": "outputs", "series_fn": "series", "gram_fn": "gram",
-          "schur_fn": "schur", "acc_fn": "acc"}
+          "schur_fn": "schur", "acc_fn": "acc", "post_kkt_fn": "post_kkt"}
 #: The model's single-state evaluators (:class:`~.codegen.Buffered`) so replaced.
 SINGLE = ("_phi", "_coord", "_cvel", "_post", "_kin", "_rates_jac", "_kkt_parts", "_free",
           "event_parts")

@@ -31,8 +31,8 @@ from scipy.linalg.lapack import dgbsv, dgesv
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 from scipy.sparse.linalg import splu
 
-__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "Symbolic", "batch",
-           "blocks", "impact_map", "matrix", "solve_symbolic", "structure", "symbolic"]
+__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "Symbolic", "batch", "blocks",
+           "impact_map", "matrix", "solve_symbolic", "structure", "symbolic"]
 
 
 def blocks(mass, Phi_q, free):
@@ -180,9 +180,8 @@ class Solver:
 
 def impact_map(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
                lock_row: int | None, target: float) -> tuple[np.ndarray, np.ndarray]:
-    """Post-impact velocities and impulses.
-
-    Solves ``[[M, Phi_q^T], [Phi_q, D]] [v+; Lambda] = [M v-; b]`` where drivers keep their
+    """Post-impact velocities and impulses: solves ``[[M, Phi_q^T], [Phi_q, D]] [v+;
+    Lambda] = [M v-; b]`` where drivers keep their
     prescribed velocity, locked joints keep 0 and the new lock row asks ``c'+ = target``.
     Returns (v+, Lambda) with Lambda the impulse of each row (N s or N m s).
     """
@@ -215,14 +214,17 @@ def batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
 def schur_functions(model: Any) -> None:
     """``model.schur_fn`` (q, v, t, p) -> (S, r): ``S = Phi_q M^-1 Phi_q^T - D``, ``r = Phi_q
     M^-1 Q - gamma``; ``model.acc_fn`` (q, v, t, p, lambda) -> ``M^-1 (Q - Phi_q^T
-    lambda)``; built once, their products on Phi_q's sparsity (A02, 8 loops: 1.13x)."""
+    lambda)``; built once on Phi_q's sparsity; ``post_kkt_fn`` (q, v, t, p) -> (a, lambda),
+    S solved by CasADi's QR: in C (on the virtual machine the batched LU is faster)."""
     if getattr(model, "schur_fn", None) is not None:
         return
     args = [model.sym[x] for x in ("q", "v", "t", "p")]
     system = symbolic(model, *args, schur=True)
-    lam = ca.SX.sym("lam", model.m)
+    lam, sol = ca.SX.sym("lam", model.m), ca.solve(system.A, system.b)
     model.schur_fn = ca.Function("schur", args, [ca.densify(system.A), ca.densify(system.b)])
     model.acc_fn = ca.Function("acc", [*args, lam], [ca.densify(system.unpack(lam)[0])])
+    model.post_kkt_fn = ca.Function("post_kkt", args, [ca.densify(system.unpack(sol)[0]),
+                                                       ca.densify(sol)])
 
 
 def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
@@ -230,6 +232,11 @@ def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.
     """(a, lambda) of every sample by :func:`schur_functions`; None if one is singular."""
     n, m = t.size, model.m
     schur_functions(model)
+    if getattr(model, "outputs_compiled", False):  # in C: 1.6x; a singular S gives nan
+        out = model.mapped("post_kkt_fn", n)(q.T, v.T, t, P.T)
+        a, lam = (np.asarray(x).reshape(-1, n).T for x in out)
+        if np.all(np.isfinite(lam)):
+            return a, lam
     S, r = model.mapped("schur_fn", n)(q.T, v.T, t, P.T)
     S = np.asarray(S).reshape(m, n, m).transpose(1, 0, 2)
     try:

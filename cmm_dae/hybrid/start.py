@@ -12,6 +12,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import AssemblyError, ModelError, Problem
+from ..core.memo import once
 from ..core.records import Event, EventKind
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
@@ -47,14 +48,11 @@ def _labels(model: Model, rows, known: list[str]) -> list[str]:
 
 
 def _once(model: Model, key: tuple, compute):
-    """``compute()`` once per model and key: the start's assembly, rank checks and
-    redundant rows depend on the model, the parameters and the given values alone, and a
-    sweep or a study runs one model many times (a 0.01-s run of a chain of 32 loops spent
-    half its time assembling the same start again)."""
-    cache = model.__dict__.setdefault("_start_cache", {})
-    if key not in cache:
-        cache[key] = compute()
-    return cache[key]
+    """``compute()`` once per model and key (:func:`~cmm_dae.core.memo.once`): the start's
+    assembly, rank checks and redundant rows depend on the model, the parameters and the
+    given values alone (a 0.01-s run of a chain of 32 loops spent half its time assembling
+    the same start again)."""
+    return once(model, ("start", *key), compute)
 
 
 def assemble_positions(model: Model, t: float, p: np.ndarray, known: dict[str, float],

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 import sksundae as sun
 
 from ..core.errors import CmmError, SolverError, Status
+from ..core.memo import once
 from ..core.records import Stats
 from ..equations.kinematics import project_state, singular_ratio
 from ..equations.model import Buffered, Model
@@ -119,18 +120,23 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
         fn = self._ev_cache.get(key)
         if fn is None:
-            y = ca.SX.sym("y", self.u.N)
-            q, v, lam = self.u.symbolic(y)
-            c, cd = model.cvel_fn(q, v)
-            vals: list = [None] * len(self.triggers)
-            ev.event_values(hs, c, cd, lam, self.triggers, vals, where=ca.if_else)
-            near = ca.SX(1.0)
-            if self.has_push:
-                push = ca.vertcat(*[vals[i] for i in self.push_idx])
-                near = ca.mmin(ca.fabs(push)) - (PUSH_MARGIN * ca.mmax(ca.fabs(lam))
-                                                 + 100.0 * ATOL_LAMBDA * k)
-            fn = Buffered(ca.Function("events", [y], [ca.vertcat(1.0, *vals), near]))
-            self._ev_cache[key] = fn
+            def build() -> ca.Function:
+                y = ca.SX.sym("y", self.u.N)
+                q, v, lam = self.u.symbolic(y)
+                c, cd = model.cvel_fn(q, v)
+                vals: list = [None] * len(self.triggers)
+                ev.event_values(hs, c, cd, lam, self.triggers, vals, where=ca.if_else)
+                near = ca.SX(1.0)
+                if self.has_push:
+                    push = ca.vertcat(*[vals[i] for i in self.push_idx])
+                    near = ca.mmin(ca.fabs(push)) - (PUSH_MARGIN * ca.mmax(ca.fabs(lam))
+                                                     + 100.0 * ATOL_LAMBDA * k)
+                return ca.Function("events", [y], [ca.vertcat(1.0, *vals), near])
+
+            # built once per model and configuration (the next run of the model meets the
+            # same ones); wrapped per run, whose buffers it writes
+            fn = self._ev_cache[key] = Buffered(once(
+                model, ("events", key, self.u.N, PUSH_MARGIN), build))
         return fn
 
     def after_events(self, transitions: list[ev.Transition]) -> None:

@@ -20,6 +20,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from ..core.errors import AssemblyError, CmmError, SolverError, Status
+from ..core.memo import once
 from ..core.progress import Bar
 from ..core.records import Stats
 from ..description.mechanism import Mechanism, require_mechanism
@@ -265,7 +266,9 @@ def _start(mech: Mechanism, model: Model | None) -> tuple:
             model = model_of(mech, _build)
         elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
             model = _without_redundant(model)
-        hs = ev.HybridState(model, labeller(mech), force_held=force_constraint_joints(mech))
+        # (the structure analysis behind the labels: once per model)
+        hs = ev.HybridState(model, once(model, ("labeller",), lambda: labeller(mech)),
+                            force_held=force_constraint_joints(mech))
         q, v, events = start_state(model, hs)
         model.kkt(q, v, 0.0, hs.p)  # the accelerations must be determined at the start
     except CmmError:
