@@ -167,3 +167,23 @@ def test_slider_dropped_straight_down_lands_and_sticks_at_one_instant():
                                                            ("stick", "K:slide")]
         assert res.events[0].t == res.events[1].t and abs(res.events[0].t - t1) <= tol
         assert res.configurations[res.events[1].after].locked == ("K", "K:slide")
+
+
+@pytest.mark.timeout(180)
+def test_sensitivities_through_slip_and_stuck_lift_off():
+    """d t / d p of the slip of the pushed slider (t = mu_s m_s g / 2: d/d mu_s = m_s g / 2,
+    d/d m_s = mu_s g / 2) and of the stuck slider's lift-off (t = m_s |g| / 5: d/d m_s =
+    |g| / 5, d/d g_y = -m_s / 5) against those closed forms within 1e-9 relative; the
+    lock and the stick at the start have none."""
+    push = cd.Load("push", cd.Law("polynomial", coefficients=(0.0, 2.0)), joint="X")
+    lift = cd.Load("lift", cd.Law("polynomial", coefficients=(0.0, 5.0)), joint="Y")
+    friction = cd.Friction(mu_static=0.4, mu_kinetic=0.3)
+    for load, params, t_end, exact in (
+            (push, ["joints.K.friction.mu_static", "bodies.slider.mass"], 0.7,
+             [MS * G / 2, 0.4 * G / 2]),
+            (lift, ["bodies.slider.mass", "gravity.y"], 1.0, [G / 5, -MS / 5])):
+        mech = cross_slide(FLOOR, friction, 0.0, 0.0, 0.0, [load])
+        s = cd.sensitivities(mech, params, t_end, rtol=1e-10)
+        assert [e.kind for e in s.result.events][:2] == ["lock", "stick"]
+        assert np.all(s.event_times[:2] == 0.0)
+        assert np.max(np.abs(s.event_times[2] - exact) / np.abs(exact)) <= 1e-9
