@@ -23,7 +23,7 @@ import pytest
 import cmm_dae as cd
 from cmm_dae.core.errors import ModelError
 from cmm_dae.description.library import four_bar_chain
-from cmm_dae.equations import kkt as schur
+from cmm_dae.equations import banded
 from cmm_dae.integrators import csegment, ida, iterative
 from cmm_dae.results import post
 
@@ -71,12 +71,12 @@ def test_bad_linsolver_is_a_model_error():
 
 
 def test_banded_schur_complement_solves_the_kkt_system():
-    """Chain of 24 loops (146 rows): the banded path is taken and its multipliers satisfy
-    the whole KKT system to round-off (relative residual 1e-12); they equal the dense
-    Schur complement's to 1e-10 relative."""
+    """Chain of 24 loops (146 rows): the banded path is taken (from Phi_q's nonzeros) and
+    its accelerations and multipliers satisfy the whole KKT system to round-off (relative
+    residual 1e-12); they equal the dense Schur complement's to 1e-10 relative."""
     mech = four_bar_chain(24)
     model = cd.Model(mech)
-    st = schur.for_model(model)
+    st = banded.for_model(model)
     assert st is not None and st.bw <= 0.125 * model.m
     res = cd.run_dae(mech, 0.05, model=model)
     t, q, v = res.t, res.data["q"], res.data["v"]
@@ -89,12 +89,12 @@ def test_banded_schur_complement_solves_the_kkt_system():
         r2 = Pq @ a[i] - gamma
         assert np.max(np.abs(r1)) <= 1e-12 * np.max(np.abs(Qf))
         assert np.max(np.abs(r2)) <= 1e-12 * max(np.max(np.abs(gamma)), 1.0)
-    saved = schur._cache[model]
-    schur._cache[model] = None  # force the dense Schur complement
+    saved = banded._cache[model]
+    banded._cache[model] = None  # force the dense Schur complement
     try:
         _, lam_d = post.batch_kkt(model, t, q, v, P)
     finally:
-        schur._cache[model] = saved
+        banded._cache[model] = saved
     assert np.max(np.abs(lam - lam_d)) <= 1e-10 * np.max(np.abs(lam_d))
 
 

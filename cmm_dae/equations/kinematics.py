@@ -12,7 +12,7 @@ import scipy.sparse.linalg as spl
 from scipy.linalg import qr, solve_triangular
 from scipy.linalg.lapack import dpbtrf
 
-from . import kkt, rank
+from . import banded, rank
 from .build import Constraints
 from .model import Model
 from .unknowns import ground_pins
@@ -214,8 +214,8 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     return rank.ratio(J)
 
 
-def _gram_band(model: Model, act: np.ndarray) -> kkt.BandedSchur | None:
-    """The banded structure of the active rows' Gram matrix (:func:`kkt.structure` with
+def _gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:
+    """The banded structure of the active rows' Gram matrix (:func:`banded.structure` with
     unit masses), kept per model and row set; None for few rows or a wide band."""
     nz = active_nonzeros(model, act)
     if nz is None:
@@ -223,7 +223,7 @@ def _gram_band(model: Model, act: np.ndarray) -> kkt.BandedSchur | None:
     per_model = _STRUCTURES[model]  # filled by active_nonzeros
     key = ("band", act.tobytes())
     if key not in per_model:
-        per_model[key] = kkt.structure(nz[0], nz[1], act.size)
+        per_model[key] = banded.structure(nz[0], nz[1], act.size)
     return per_model[key]
 
 
@@ -245,7 +245,7 @@ def gram_function(model: Model) -> ca.Function:
     return fn
 
 
-def _gram_lower(band: kkt.BandedSchur, vals: np.ndarray) -> np.ndarray:
+def _gram_lower(band: banded.BandedSchur, vals: np.ndarray) -> np.ndarray:
     """The Gram matrices of states whose Jacobian nonzeros (at ``band.rows``,
     ``band.cols``) are ``vals`` (states, nonzeros), in LAPACK's lower band storage
     (states, bw + 1, m): the lower half of the banded structure's dgbsv storage."""

@@ -8,10 +8,8 @@
   fixed pattern for large systems (:data:`KKT_SPARSE_FROM`).
 * :func:`batch` solves every sample of a run at once for post-processing: the Schur
   complement ``S lam = Phi_q M^-1 Q - gamma``, ``S = Phi_q M^-1 Phi_q^T - D`` (m x m),
-  batched dense, or banded sample by sample for a large mechanism (:func:`structure`:
-  with a fixed pattern reordered by reverse Cuthill-McKee, each sample costs one banded
-  LU, LAPACK ``dgbsv``, its values accumulated through one sparse product); the whole
-  matrix where a sample's complement is singular.
+  batched dense, or banded from Phi_q's nonzeros for a large mechanism (:mod:`.banded`);
+  the whole matrix where a sample's complement is singular.
 * :func:`impact_map` solves the same matrix for the velocities and impulses of an impact.
 
 Friction that grows with the reaction makes the system nonlinear: the solves here are
@@ -20,19 +18,19 @@ corrected by :func:`cmm_dae.equations.reaction.solve`.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg.lapack import dgbsv, dgesv
-from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.linalg.lapack import dgesv
 from scipy.sparse.linalg import splu
 
+from .banded import banded_solve, batch_from_nonzeros, for_model
+
 __all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "Symbolic", "batch", "blocks",
-           "impact_map", "matrix", "solve_symbolic", "structure", "symbolic"]
+           "impact_map", "matrix", "solve_symbolic", "symbolic"]
 
 
 def blocks(mass, Phi_q, free):
@@ -251,8 +249,11 @@ def _linear_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np
                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`batch` without friction from the reaction."""
     n, nq, m = t.size, model.nq, model.m
-    if m and np.all(model.mass > 0.0) and for_model(model) is None:
-        got = _schur_batch(model, t, q, v, P)  # a small or not banded mechanism
+    if m and np.all(model.mass > 0.0):
+        # a small or not banded mechanism by the Schur complement's functions, a banded
+        # one from Phi_q's nonzeros (A02, 32 loops: 2 % of the dense Jacobian's entries)
+        got = _schur_batch(model, t, q, v, P) if for_model(model) is None else \
+            batch_from_nonzeros(model, t, q, v, P)
         if got is not None:
             return got
     Phi_q, Qf, gamma = model.mapped("kkt_fn", n)(q.T, v.T, t, P.T)
@@ -294,7 +295,7 @@ def _schur_multipliers(model: Any, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.
     st = for_model(model)
     if st is not None:
         try:
-            return banded_solve(st, Phi_q, model.mass, Qf, gamma, free)
+            return banded_solve(st, Phi_q[:, st.rows, st.cols], model.mass, Qf, gamma, free)
         except np.linalg.LinAlgError:
             pass  # the dense one, then the whole matrix
     PM = Phi_q / model.mass
@@ -306,95 +307,3 @@ def _schur_multipliers(model: Any, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.
         return np.linalg.solve(S, rhs[..., None])[..., 0]
     except np.linalg.LinAlgError:
         return None
-
-
-#: The banded path is taken from this many constraint rows on, when the band is narrow
-#: (at most BAND_SHARE of m after reordering); smaller systems are solved dense and batched.
-BANDED_FROM = 64
-BAND_SHARE = 0.125
-
-
-@dataclass(frozen=True)
-class BandedSchur:
-    """The fixed structure of ``S`` for one model (see :func:`structure`)."""
-
-    rows: np.ndarray      # (nnz,) row of each structural nonzero of Phi_q
-    cols: np.ndarray      # (nnz,) column of each
-    to_band: sp.csr_matrix  # (ntrip, band entries): products -> banded storage of S
-    pa: np.ndarray        # (ntrip,) the two nonzeros of each product
-    pb: np.ndarray
-    pk: np.ndarray        # (ntrip,) their common column
-    diag: np.ndarray      # (m,) flat banded index of S's diagonal, in the new order
-    perm: np.ndarray      # (m,) the reordering: new row i is old row perm[i]
-    bw: int               # half bandwidth after reordering
-    m: int
-
-
-def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
-    """The banded structure of ``S`` for Phi_q's nonzeros at (rows, cols), or None when the
-    system is small or its band is not narrow (then the dense batched solve is better)."""
-    if m < BANDED_FROM:
-        return None
-    pa, pb = [], []
-    by_col: dict[int, list[int]] = {}
-    for e, k in enumerate(cols):
-        by_col.setdefault(int(k), []).append(e)
-    for ents in by_col.values():
-        for a in ents:
-            for b in ents:
-                pa.append(a)
-                pb.append(b)
-    pa, pb = np.array(pa, int), np.array(pb, int)
-    ra, rb = rows[pa], rows[pb]
-    pattern = sp.csr_matrix((np.ones(pa.size), (ra, rb)), shape=(m, m)) + sp.identity(m)
-    perm = np.asarray(reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True), int)
-    inv = np.empty(m, int)
-    inv[perm] = np.arange(m)
-    i, j = inv[ra], inv[rb]
-    bw = int(np.max(np.abs(i - j), initial=0))
-    if bw > BAND_SHARE * m:
-        return None
-    # dgbsv's storage: (2 bw + bw + 1, m), A[i, j] at row 2 bw + i - j, column j
-    ldab = 3 * bw + 1
-    flat = (2 * bw + i - j) * m + j
-    to_band = sp.csr_matrix((np.ones(pa.size), (np.arange(pa.size), flat)),
-                            shape=(pa.size, ldab * m))
-    d = np.arange(m)
-    return BandedSchur(rows, cols, to_band, pa, pb, cols[pa], 2 * bw * m + d, perm, bw, m)
-
-
-def banded_solve(st: BandedSchur, Phi_q: np.ndarray, mass: np.ndarray, Qf: np.ndarray,
-          gamma: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """Multipliers (n, m) of every sample from Phi_q (n, m, nq), Q (n, nq), gamma (n, m)
-    and the inactive-row flags ``free`` (n, m). Raises numpy.linalg.LinAlgError on a
-    singular sample."""
-    n, m = Phi_q.shape[0], st.m
-    vals = Phi_q[:, st.rows, st.cols]                       # (n, nnz)
-    prod = vals[:, st.pa] * vals[:, st.pb] / mass[st.pk]    # (n, ntrip)
-    ab = np.asarray((st.to_band.T @ prod.T).T).reshape(n, 3 * st.bw + 1, m)
-    ab = ab.reshape(n, -1)
-    ab[:, st.diag] -= free[:, st.perm]
-    ab = ab.reshape(n, 3 * st.bw + 1, m)
-    rhs = np.zeros((n, m))
-    np.add.at(rhs.T, st.rows, (vals * (Qf[:, st.cols] / mass[st.cols])).T)
-    rhs = (rhs - gamma)[:, st.perm]
-    lam = np.empty((n, m))
-    bw = st.bw
-    for s in range(n):
-        _, _, x, info = dgbsv(bw, bw, ab[s], rhs[s], overwrite_ab=True, overwrite_b=True)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"singular Schur complement at sample {s}")
-        lam[s, st.perm] = x
-    return lam
-
-
-_cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def for_model(model) -> BandedSchur | None:
-    """:func:`structure` of a model's Phi_q pattern (computed once per model)."""
-    if model not in _cache:
-        rows, cols = model.phi_q_pattern.get_triplet()
-        _cache[model] = (structure(np.asarray(rows, int), np.asarray(cols, int), model.m)
-                         if np.all(model.mass > 0.0) else None)
-    return _cache[model]

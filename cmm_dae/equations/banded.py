@@ -1,0 +1,134 @@
+"""The KKT system's Schur complement of a large mechanism as a band: for a chain of loops
+``S = Phi_q M^-1 Phi_q^T - D`` is banded once its rows are reordered (reverse
+Cuthill-McKee), and each sample costs one banded LU (LAPACK ``dgbsv``), its values
+accumulated from Phi_q's nonzeros through one sparse product (:func:`structure`,
+:func:`banded_solve`); post-processing evaluates those nonzeros alone
+(:func:`batch_from_nonzeros`)."""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+from scipy.linalg.lapack import dgbsv
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+__all__ = ["BANDED_FROM", "BAND_SHARE", "BandedSchur", "banded_solve", "batch_from_nonzeros",
+           "for_model", "structure"]
+
+
+#: The banded path is taken from this many constraint rows on, when the band is narrow
+#: (at most BAND_SHARE of m after reordering); smaller systems are solved dense and batched.
+BANDED_FROM = 64
+BAND_SHARE = 0.125
+
+
+@dataclass(frozen=True)
+class BandedSchur:
+    """The fixed structure of ``S`` for one model (see :func:`structure`)."""
+
+    rows: np.ndarray      # (nnz,) row of each structural nonzero of Phi_q
+    cols: np.ndarray      # (nnz,) column of each
+    to_band: sp.csr_matrix  # (ntrip, band entries): products -> banded storage of S
+    pa: np.ndarray        # (ntrip,) the two nonzeros of each product
+    pb: np.ndarray
+    pk: np.ndarray        # (ntrip,) their common column
+    diag: np.ndarray      # (m,) flat banded index of S's diagonal, in the new order
+    perm: np.ndarray      # (m,) the reordering: new row i is old row perm[i]
+    bw: int               # half bandwidth after reordering
+    m: int
+
+
+def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
+    """The banded structure of ``S`` for Phi_q's nonzeros at (rows, cols), or None when the
+    system is small or its band is not narrow (then the dense batched solve is better)."""
+    if m < BANDED_FROM:
+        return None
+    pa, pb = [], []
+    by_col: dict[int, list[int]] = {}
+    for e, k in enumerate(cols):
+        by_col.setdefault(int(k), []).append(e)
+    for ents in by_col.values():
+        for a in ents:
+            for b in ents:
+                pa.append(a)
+                pb.append(b)
+    pa, pb = np.array(pa, int), np.array(pb, int)
+    ra, rb = rows[pa], rows[pb]
+    pattern = sp.csr_matrix((np.ones(pa.size), (ra, rb)), shape=(m, m)) + sp.identity(m)
+    perm = np.asarray(reverse_cuthill_mckee(pattern.tocsr(), symmetric_mode=True), int)
+    inv = np.empty(m, int)
+    inv[perm] = np.arange(m)
+    i, j = inv[ra], inv[rb]
+    bw = int(np.max(np.abs(i - j), initial=0))
+    if bw > BAND_SHARE * m:
+        return None
+    # dgbsv's storage: (2 bw + bw + 1, m), A[i, j] at row 2 bw + i - j, column j
+    ldab = 3 * bw + 1
+    flat = (2 * bw + i - j) * m + j
+    to_band = sp.csr_matrix((np.ones(pa.size), (np.arange(pa.size), flat)),
+                            shape=(pa.size, ldab * m))
+    d = np.arange(m)
+    return BandedSchur(rows, cols, to_band, pa, pb, cols[pa], 2 * bw * m + d, perm, bw, m)
+
+
+def banded_solve(st: BandedSchur, vals: np.ndarray, mass: np.ndarray, Qf: np.ndarray,
+          gamma: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Multipliers (n, m) of every sample from Phi_q's nonzeros ``vals`` (n, nnz; at
+    ``st.rows``, ``st.cols``), Q (n, nq), gamma (n, m) and the inactive-row flags ``free``
+    (n, m). Raises numpy.linalg.LinAlgError on a singular sample."""
+    n, m = vals.shape[0], st.m
+    prod = vals[:, st.pa] * vals[:, st.pb] / mass[st.pk]    # (n, ntrip)
+    ab = np.asarray((st.to_band.T @ prod.T).T).reshape(n, 3 * st.bw + 1, m)
+    ab = ab.reshape(n, -1)
+    ab[:, st.diag] -= free[:, st.perm]
+    ab = ab.reshape(n, 3 * st.bw + 1, m)
+    rhs = np.zeros((n, m))
+    np.add.at(rhs.T, st.rows, (vals * (Qf[:, st.cols] / mass[st.cols])).T)
+    rhs = (rhs - gamma)[:, st.perm]
+    lam = np.empty((n, m))
+    bw = st.bw
+    for s in range(n):
+        _, _, x, info = dgbsv(bw, bw, ab[s], rhs[s], overwrite_ab=True, overwrite_b=True)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"singular Schur complement at sample {s}")
+        lam[s, st.perm] = x
+    return lam
+
+
+_cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def for_model(model) -> BandedSchur | None:
+    """:func:`structure` of a model's Phi_q pattern (computed once per model)."""
+    if model not in _cache:
+        rows, cols = model.phi_q_pattern.get_triplet()
+        _cache[model] = (structure(np.asarray(rows, int), np.asarray(cols, int), model.m)
+                         if np.all(model.mass > 0.0) else None)
+    return _cache[model]
+
+
+def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(a, lambda) of every sample of a banded mechanism (:func:`for_model`) from Phi_q's
+    nonzeros alone; None if a sample's Schur complement is singular."""
+    n, st = t.size, for_model(model)
+    if getattr(model, "kkt_nz_fn", None) is None:
+        args = model.kkt_fn.sx_in()
+        _, Qf, gamma = model.kkt_fn(*args)
+        nz = model.phi_q_nz_fn(args[0], args[2], args[3])
+        model.kkt_nz_fn = ca.Function("kkt_nz", args, [nz, Qf, gamma])
+    vals, Qf, gamma = (np.asarray(x).reshape(-1, n).T for x in model.mapped(
+        "kkt_nz_fn", n)(q.T, v.T, t, P.T))
+    free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n).T
+    try:
+        lam = banded_solve(st, vals, model.mass, Qf, gamma, free)
+    except np.linalg.LinAlgError:
+        return None
+    force = np.zeros((n, model.nq))  # Phi_q^T lambda, nonzero by nonzero
+    np.add.at(force.T, st.cols, (vals * lam[:, st.rows]).T)
+    return (Qf - force) / model.mass, lam
