@@ -213,12 +213,12 @@ def schur_functions(model: Any) -> None:
     """``model.schur_fn`` (q, v, t, p) -> (S, r): ``S = Phi_q M^-1 Phi_q^T - D``, ``r = Phi_q
     M^-1 Q - gamma``; ``model.acc_fn`` (q, v, t, p, lambda) -> ``M^-1 (Q - Phi_q^T
     lambda)``; built once on Phi_q's sparsity; ``post_kkt_fn`` (q, v, t, p) -> (a, lambda),
-    S solved by CasADi's QR: in C (on the virtual machine the batched LU is faster)."""
+    S by LDL^T (stable: S is positive definite but for -1 alone on inactive rows), in C."""
     if getattr(model, "schur_fn", None) is not None:
         return
     args = [model.sym[x] for x in ("q", "v", "t", "p")]
     system = symbolic(model, *args, schur=True)
-    lam, sol = ca.SX.sym("lam", model.m), ca.solve(system.A, system.b)
+    lam, sol = ca.SX.sym("lam", model.m), ca.ldl_solve(system.b, *ca.ldl(system.A, False))
     model.schur_fn = ca.Function("schur", args, [ca.densify(system.A), ca.densify(system.b)])
     model.acc_fn = ca.Function("acc", [*args, lam], [ca.densify(system.unpack(lam)[0])])
     model.post_kkt_fn = ca.Function("post_kkt", args, [ca.densify(system.unpack(sol)[0]),
@@ -230,7 +230,7 @@ def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.
     """(a, lambda) of every sample by :func:`schur_functions`; None if one is singular."""
     n, m = t.size, model.m
     schur_functions(model)
-    if getattr(model, "outputs_compiled", False):  # in C: 1.6x; a singular S gives nan
+    if getattr(model, "outputs_compiled", False):  # in C: 5.2x; a singular S gives nan
         out = model.mapped("post_kkt_fn", n)(q.T, v.T, t, P.T)
         a, lam = (np.asarray(x).reshape(-1, n).T for x in out)
         if np.all(np.isfinite(lam)):
