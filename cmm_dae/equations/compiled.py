@@ -16,16 +16,18 @@ library and put in place of the model's own (:func:`use_compiled`).
 
 from __future__ import annotations
 
+import math
 import subprocess
 
 import casadi as ca
 import numpy as np
 
+from ..core.memo import once
 from . import kinematics, kkt, outputs
 from .codegen import Buffered, NotBuiltError, build_library, function_key
 from .model import Model
 
-__all__ = ["MAPPED", "SINGLE", "use_compiled"]
+__all__ = ["MAPPED", "OUTPUTS_BUDGET", "SINGLE", "instructions", "use_compiled"]
 
 #: The model's attributes so replaced, and the names of their CasADi functions.
 MAPPED = {"outputs_fn": "outputs", "series_fn": "series", "gram_fn": "gram",
@@ -46,12 +48,37 @@ def _functions(model: Model) -> dict[str, ca.Function]:
             if getattr(model, attr, None) is not None}
 
 
+#: Most CasADi instructions compiled into the library of a model's post-processing and
+#: screen functions: gcc's time grows faster than their count (0.75 s for the double-folded
+#: mechanism's 3,600, 2.8 s for the nipper's 10,100, 13.5 s for A02 with 8 loops' 28,600,
+#: 359 s with 32 loops); a larger model keeps them on CasADi's virtual machine.
+OUTPUTS_BUDGET = 12_000
+
+
+def instructions(model: Model) -> float:
+    """CasADi instructions of the functions :func:`use_compiled` compiles (counted once
+    per model, before they are replaced by compiled ones, which cannot count them); inf
+    for more than 40 constraint rows, without building them (their Schur complement and
+    Gram matrix alone are m^2 outputs: A02 with 8 loops, 50 rows, is over the budget)."""
+    if model.m > 40:
+        return math.inf
+
+    def count() -> int:
+        every = [*_functions(model).values(), *(getattr(model, a).fn for a in SINGLE)]
+        return sum(f.n_instructions() for f in every)
+
+    return once(model, ("outputs instructions",), count)
+
+
 def use_compiled(model: Model, build: bool = True) -> bool:
     """Put compiled versions of the functions of :data:`MAPPED` in place of ``model``'s
     own, from the cache (``build=False``: only if built already) or built now; False,
-    with the model unchanged, where they are not built or cannot be."""
+    with the model unchanged, where they are not built or cannot be, or are more than
+    :data:`OUTPUTS_BUDGET` instructions."""
     if getattr(model, "outputs_compiled", False):
         return True
+    if instructions(model) > OUTPUTS_BUDGET:
+        return False
     funcs = _functions(model)
     singles = {attr: getattr(model, attr).fn for attr in SINGLE}
     every = [*funcs.values(), *singles.values()]

@@ -29,8 +29,8 @@ from scipy.sparse.linalg import splu
 
 from .banded import banded_solve, batch_from_nonzeros, for_model
 
-__all__ = ["KKT_SPARSE_FROM", "SINGULAR", "Solver", "SparseKKT", "Symbolic", "batch", "blocks",
-           "impact_map", "matrix", "solve_symbolic", "symbolic"]
+__all__ = ["KKT_SPARSE_FROM", "LDL_ROWS", "SINGULAR", "Solver", "SparseKKT", "Symbolic",
+           "batch", "blocks", "impact_map", "matrix", "solve_symbolic", "symbolic"]
 
 
 def blocks(mass, Phi_q, free):
@@ -209,20 +209,30 @@ def batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
     return a, lam
 
 
+#: Largest number of constraint rows whose Schur complement is factored symbolically for
+#: the compiled post-processing (an LDL^T costs about m^3 / 3 instructions: with it the
+#: chain of 32 loops, 194 rows, took 368 s to build; larger systems keep LAPACK's LU).
+LDL_ROWS = 40
+
+
 def schur_functions(model: Any) -> None:
     """``model.schur_fn`` (q, v, t, p) -> (S, r): ``S = Phi_q M^-1 Phi_q^T - D``, ``r = Phi_q
     M^-1 Q - gamma``; ``model.acc_fn`` (q, v, t, p, lambda) -> ``M^-1 (Q - Phi_q^T
     lambda)``; built once on Phi_q's sparsity; ``post_kkt_fn`` (q, v, t, p) -> (a, lambda),
-    S by LDL^T (stable: S is positive definite but for -1 alone on inactive rows), in C."""
+    S by LDL^T (stable: S is positive definite but for -1 alone on inactive rows), in C,
+    up to :data:`LDL_ROWS` rows (None above)."""
     if getattr(model, "schur_fn", None) is not None:
         return
     args = [model.sym[x] for x in ("q", "v", "t", "p")]
     system = symbolic(model, *args, schur=True)
-    lam, sol = ca.SX.sym("lam", model.m), ca.ldl_solve(system.b, *ca.ldl(system.A, False))
+    lam = ca.SX.sym("lam", model.m)
     model.schur_fn = ca.Function("schur", args, [ca.densify(system.A), ca.densify(system.b)])
     model.acc_fn = ca.Function("acc", [*args, lam], [ca.densify(system.unpack(lam)[0])])
-    model.post_kkt_fn = ca.Function("post_kkt", args, [ca.densify(system.unpack(sol)[0]),
-                                                       ca.densify(sol)])
+    model.post_kkt_fn = None
+    if model.m <= LDL_ROWS:
+        sol = ca.ldl_solve(system.b, *ca.ldl(system.A, False))
+        model.post_kkt_fn = ca.Function("post_kkt", args, [
+            ca.densify(system.unpack(sol)[0]), ca.densify(sol)])
 
 
 def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
@@ -230,7 +240,8 @@ def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.
     """(a, lambda) of every sample by :func:`schur_functions`; None if one is singular."""
     n, m = t.size, model.m
     schur_functions(model)
-    if getattr(model, "outputs_compiled", False):  # in C: 5.2x; a singular S gives nan
+    if getattr(model, "outputs_compiled", False) and model.post_kkt_fn is not None:
+        # in C: 5.2x on the double-folded mechanism; a singular S gives inf or nan
         out = model.mapped("post_kkt_fn", n)(q.T, v.T, t, P.T)
         a, lam = (np.asarray(x).reshape(-1, n).T for x in out)
         if np.all(np.isfinite(lam)):

@@ -340,18 +340,18 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None
     return got if isinstance(got, CompiledModel) else None
 
 
-#: compiled="auto" builds a mechanism's segment in the background after a run of it that
-#: took at least this long in Python (s) and twice the build's estimate
-#: (:func:`build_estimate`): a run that short gains less than the build costs.
+#: compiled="auto" builds a segment in the background after a run that took this long in
+#: Python (s) and twice the build's estimate (:func:`build_estimate`): not sooner.
 AUTO_BUILD_AFTER = 2.0
 
 
 def build_estimate(model: Model) -> float:
-    """Seconds to build ``model``'s compiled segment, from the size of its residual and
-    Jacobian (measured with gcc -O2: 0.28-0.64 s for 1,500-3,500 CasADi instructions,
-    4.4 s for A02 with 32 loops' 13,900)."""
-    u = model.ida
-    return 0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
+    """Seconds to build ``model``'s compiled segment from its CasADi instructions (gcc -O2:
+    residual and Jacobian 0.28-0.64 s for 1,500-3,500, 4.4 s for 13,900; post-processing's
+    library, where built, 0.75-2.9 s for 3,600-11,300)."""
+    u, outs = model.ida, compiled.instructions(model)
+    return 0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions()) + \
+        (0.2 + 2.5e-4 * outs if outs <= compiled.OUTPUTS_BUDGET else 0.0)
 
 
 def build_later(model: Model, sparse: bool, mode: bool | str, used: CompiledModel | None,
