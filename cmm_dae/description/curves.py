@@ -28,11 +28,20 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["GAUSS_NODES", "Spline", "spline"]
+__all__ = ["GAUSS_NODES", "Spline", "polar_knots", "spline"]
 
 #: Gauss-Legendre nodes per piece for the arc length.
 GAUSS_NODES = 12
 _X, _W = np.polynomial.legendre.leggauss(GAUSS_NODES)
+
+
+def polar_knots(points) -> tuple[np.ndarray, np.ndarray]:
+    """A closed curve's knots: the points' polar angles (increasing, from the first
+    point's, spanning one turn; the first repeated a turn later) and radii (m)."""
+    pts = np.asarray(points, float)
+    ang = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
+    rad = np.hypot(pts[:, 0], pts[:, 1])
+    return np.append(ang, ang[0] + 2 * math.pi), np.append(rad, rad[0])
 
 
 class Spline:
@@ -52,10 +61,8 @@ class Spline:
         pts = np.asarray(points, float)
         self.closed = closed
         if closed:
-            ang = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
-            rad = np.hypot(pts[:, 0], pts[:, 1])
-            self.knots = np.append(ang, ang[0] + 2 * math.pi)
-            sp = CubicSpline(self.knots, np.append(rad, rad[0]), bc_type="periodic")
+            self.knots, rad = polar_knots(pts)
+            sp = CubicSpline(self.knots, rad, bc_type="periodic")
         else:
             self.knots = pts[:, 0].copy()
             sp = CubicSpline(self.knots, pts[:, 1])

@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-import numpy as np
+from .curves import polar_knots
 
 __all__ = ["Curve", "Damper", "Friction", "Gear", "Limits", "Spring"]
 
@@ -97,12 +97,8 @@ class Curve:
             (float(x), float(y)) for x, y in self.points))
 
     def polar(self) -> tuple:
-        """A spline's knots: polar angles (increasing, from the first point's, spanning one
-        turn; the first repeated a turn later) and radii (m)."""
-        pts = np.asarray(self.points, float)
-        ang = np.unwrap(np.arctan2(pts[:, 1], pts[:, 0]))
-        rad = np.hypot(pts[:, 0], pts[:, 1])
-        return np.append(ang, ang[0] + 2 * math.pi), np.append(rad, rad[0])
+        """A closed spline's knots: polar angles and radii (m), :func:`.curves.polar_knots`."""
+        return polar_knots(self.points)
 
 
 @dataclass(frozen=True)

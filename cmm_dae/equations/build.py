@@ -79,7 +79,8 @@ def names(mdl, mech) -> None:
     #: contact with a slide without its friction) and the slides (bilateral, the friction)
     mdl.joints, mdl.sjoints = ({**{n: replace(j, friction=None) if n in of else j
                                    for n, j in m.joints.items()},
-                                **{s: replace(m.joints[k], name=s, unilateral=False)
+                                **{s: replace(m.joints[k], name=s, unilateral=False,
+                                              restitution=0.0)  # (it has no stop)
                                    for s, k in mdl.slides.items()}}
                                for m in (mech, mdl.smech))
     #: joints with a lock row: on a stop (limits) or sticking (friction), then the slides

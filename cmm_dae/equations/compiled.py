@@ -58,9 +58,10 @@ OUTPUTS_BUDGET = 12_000
 def instructions(model: Model) -> float:
     """CasADi instructions of the functions :func:`use_compiled` compiles (counted once
     per model, before they are replaced by compiled ones, which cannot count them); inf
-    for more than 40 constraint rows, without building them (their Schur complement and
-    Gram matrix alone are m^2 outputs: A02 with 8 loops, 50 rows, is over the budget)."""
-    if model.m > 40:
+    for more than :data:`~.kkt.LDL_ROWS` constraint rows, without building them (their
+    Schur complement and Gram matrix alone are m^2 outputs: A02 with 8 loops, 50 rows, is
+    over the budget)."""
+    if model.m > kkt.LDL_ROWS:
         return math.inf
 
     def count() -> int:

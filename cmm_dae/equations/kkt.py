@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.linalg.lapack import dgesv
 from scipy.sparse.linalg import splu
 
-from .banded import banded_solve, batch_from_nonzeros, for_model
+from .banded import batch_from_nonzeros, for_model
 
 __all__ = ["KKT_SPARSE_FROM", "LDL_ROWS", "SINGULAR", "Solver", "SparseKKT", "Symbolic",
            "batch", "blocks", "impact_map", "matrix", "solve_symbolic", "symbolic"]
@@ -301,14 +301,9 @@ def _linear_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np
 
 def _schur_multipliers(model: Any, Phi_q: np.ndarray, Qf: np.ndarray, gamma: np.ndarray,
                        free: np.ndarray) -> np.ndarray | None:
-    """Multipliers (n, m) from the Schur complement: banded sample by sample for a large
-    mechanism, else dense and batched; None when a sample's complement is singular."""
-    st = for_model(model)
-    if st is not None:
-        try:
-            return banded_solve(st, Phi_q[:, st.rows, st.cols], model.mass, Qf, gamma, free)
-        except np.linalg.LinAlgError:
-            pass  # the dense one, then the whole matrix
+    """Multipliers (n, m) from the dense Schur complement, batched; None when a sample's
+    complement is singular (a banded mechanism gets here only after its banded solve of
+    the same values failed: :func:`~.banded.batch_from_nonzeros`)."""
     PM = Phi_q / model.mass
     S = PM @ Phi_q.transpose(0, 2, 1)
     d = np.arange(model.m)

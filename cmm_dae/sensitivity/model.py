@@ -71,9 +71,8 @@ class Equations:
         self.imp = _Mat(ca.Function("simp", [q, vm, t, p, th, erow, tgt, z], [dn(K)] + [
             dn(ca.jacobian(Ri, x)) for x in (q, vm, t, p, th, tgt)]))
         # the rebound target -e c'_k of a joint (onehot over joints)
-        onehot = ca.SX.sym("oh", len(model.jidx))  # (the slides' restitution: none)
-        e = ca.vertcat(*[j.restitution for j in model.smech.joints.values()],
-                       *[0.0 for _ in model.slides])
+        onehot = ca.SX.sym("oh", len(model.jidx))  # (joints, then slides)
+        e = ca.vertcat(*[model.sjoints[n].restitution for n in model.jidx])
         target = -ca.dot(onehot, e) * ca.dot(onehot, sy["cdot"])
         self.tgt = _Mat(ca.Function("stgt", [q, v, th, onehot], [target] + [
             dn(ca.jacobian(target, x)) for x in (q, v, th)]))
