@@ -8,7 +8,7 @@ import numpy as np
 
 from ..equations.kinematics import project_state, singular_ratio
 from ..hybrid.state import SegmentTrace
-from ..singular.gauss import GL_A, GL_B, gl2_step
+from ..singular.gauss import GL_A, GL_B, dense, gl2_step
 from ..singular.instant import hermite, null_vectors
 
 __all__ = ["CrossingPass", "TAU_RATIO"]
@@ -33,13 +33,13 @@ class CrossingPass:
         cr = seg.crossing  # never a branch switch: refused before the pass
         p = seg.p
         dP = self.dp_of(p)
-        ends = self._replay(cr, sq, sv, p, dP)
+        ends, dl = self._replay(cr, sq, sv, p, dP)
         if seg.crossing_logged:
             self.tau.append(self._singular_tau(p, dP, ends, cr.t_singular))
         # the output grid inside the window (the run recorded it from the crossing's steps)
         t = self.res.t
         while n < t.size - 1 and t[n] < cr.t_after:
-            self.sq[n], self.sv[n] = self.inside(cr, ends, float(t[n]), p, dP)
+            self.sq[n], self.sv[n] = self.inside(cr, ends, dl, float(t[n]), p, dP)
             self.dP[n], self.params[n] = dP, p
             n += 1
         q, v = cr.q, cr.v
@@ -102,35 +102,52 @@ class CrossingPass:
             out.append(tau_at(t, q, v, sq, sv))
         return 0.5 * (out[0] + out[1])
 
-    def inside(self, cr, ends: list, t: float, p, dP) -> tuple[np.ndarray, np.ndarray]:
-        """(s_q, s_v) at a time t inside the crossing ``cr`` (replayed to ``ends``): the
-        derivative of the Gauss step :meth:`~cmm_dae.singular.Crossing.state_at` takes to
-        it, projected as that state is."""
-        t0, q0, v0, sq0, sv0 = ends[cr.start_for(t)]
-        if t != t0:
-            guess = self.model.kkt(q0, v0, t0, p)[0]
-            q0, v0, sq0, sv0, _ = self._gauss_tangent(t0, q0, v0, sq0, sv0, t - t0, guess,
-                                                      p, dP)
-        q1, v1 = project_state(self.model, q0, v0, t, p)
-        return self.project(q1, v1, t, p, dP, sq0, sv0)
+    def inside(self, cr, ends: list, dl: list, t: float, p, dP
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(s_q, s_v) at a time t inside the crossing ``cr`` (replayed to ``ends``, its
+        steps' stage tangents' differences ``dl``): the derivative of how
+        :meth:`~cmm_dae.singular.Crossing.state_at` reads the step there (the same quintic
+        on the tangents, those of the end accelerations from the KKT system's
+        derivative), projected as that state is."""
+        k = cr.interval(t)
+        model, nq = self.model, self.model.nq
+        accels, tangents = [], []
+        for i in (k, k + 1):
+            a = cr.end_accel(model, p, i)
+            accels.append(a)
+            if a is None:  # the singular instant: the stage tangents' difference instead
+                tangents.append(None)
+                continue
+            te, qe, ve, sqe, sve = ends[i]
+            qp, vp = project_state(model, qe, ve, te, p)
+            zq, zv = self.project(qp, vp, te, p, dP, sqe, sve)
+            tangents.append(self.kkt_d(qp, vp, te, p, dP, zq, zv)[2][:nq])
+        (t0, q0, v0, sq0, sv0), (t1, q1, v1, sq1, sv1) = ends[k], ends[k + 1]
+        q, v = dense(t0, q0, v0, accels[0], t1, q1, v1, accels[1], cr.dk[k], t)
+        sq, sv = dense(t0, sq0, sv0, tangents[0], t1, sq1, sv1, tangents[1], dl[k], t)
+        q, v = project_state(model, q, v, t, p)
+        return self.project(q, v, t, p, dP, sq, sv)
 
-    def _replay(self, cr, sq, sv, p, dP) -> list:
+    def _replay(self, cr, sq, sv, p, dP) -> tuple[list, list]:
         """The crossing's Gauss steps again from its start, with their tangents: the step
-        ends [(t, q, v, s_q, s_v)]."""
+        ends [(t, q, v, s_q, s_v)] and each step's stage tangents' difference."""
         tt, qq, vv = cr.ends[0]
         guess = self.model.kkt(qq, vv, tt, p)[0]
         ends = [(tt, qq, vv, sq, sv)]
+        dl: list = []
         for h in cr.steps:
-            qq, vv, sq, sv, guess = self._gauss_tangent(tt, qq, vv, sq, sv, h, guess, p, dP)
+            qq, vv, sq, sv, guess = self._gauss_tangent(tt, qq, vv, sq, sv, h, guess, p, dP,
+                                                        dl)
             tt += h
             ends.append((tt, qq, vv, sq, sv))
-        return ends
+        return ends, dl
 
-    def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP):
+    def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP, dl: list | None = None):
         """One Gauss step of the crossing (:func:`cmm_dae.singular.gauss.gl2_step`) and its
         derivative: the Gauss method on the variational equations, the stage tangents made
         consistent with the constraints as the stage states are (the derivative of the
-        projections); returns (q, v, s_q, s_v, next guess)."""
+        projections); returns (q, v, s_q, s_v, next guess). ``dl``, when given, receives
+        the stage tangents' difference (the derivative of :attr:`Crossing.dk`)."""
         nq = self.model.nq
         stages: list = []
         qn, vn, guess = gl2_step(self.model, p, t, q, v, h, guess, stages)
@@ -147,5 +164,7 @@ class CrossingPass:
             if change <= 1e-13 * (1.0 + float(np.max(np.abs(L)))):
                 break
         dV = sv[None] + h * np.einsum("ij,jkl->ikl", GL_A, L)
+        if dl is not None:
+            dl.append(L[1] - L[0])
         return (qn, vn, sq + h * np.einsum("i,ikl->kl", GL_B, dV),
                 sv + h * np.einsum("i,ikl->kl", GL_B, L), guess)

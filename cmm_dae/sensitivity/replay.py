@@ -179,10 +179,10 @@ class SensitivityPass(CrossingPass):
             except SolverError:
                 raise SolverError(f"the sensitivity integration failed at t = {t_f:.9g} s: "
                                   f"IDA: {r.message}", status=Status.INTEGRATOR) from None
-            ends = self._replay(cr, sq, sv, p, dP)
+            ends, dl = self._replay(cr, sq, sv, p, dP)
             for x in outs:
                 if t_f < x <= cr.t_after:
-                    zq, zv = self.inside(cr, ends, x, p, dP)
+                    zq, zv = self.inside(cr, ends, dl, x, p, dP)
                     T_all.append(x)
                     Sq_all.append(zq)
                     Sv_all.append(zv)

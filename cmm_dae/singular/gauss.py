@@ -24,8 +24,8 @@ SAFETY = 0.25
 
 
 def gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-             h: float, guess: np.ndarray, stages: list | None = None
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+             h: float, guess: np.ndarray, stages: list | None = None,
+             accels: list | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One two-stage Gauss-Legendre step of q' = v, v' = a(t, q, v).
 
     The accelerations are taken at the stage states projected onto the constraints: off
@@ -36,7 +36,8 @@ def gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
     predicts the stage accelerations (never the acceleration at the step's start, which
     may be the singular instant itself, where it is undetermined); returns q, v and the
     last stage's acceleration (the next step's guess). ``stages``, when given, receives
-    the two projected stage states (t, q, v) of the last iteration."""
+    the two projected stage states (t, q, v) of the last iteration; ``accels``, when
+    given, the two stage accelerations (what :func:`dense` reads the step through)."""
     def acc(tt, qq, vv):
         q1, v1, _ = project(model, p, qq, vv, tt)
         return model.kkt(q1, v1, tt, p)[0]
@@ -54,11 +55,62 @@ def gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
         if not change < 1e3 * scale:
             raise np.linalg.LinAlgError("the Gauss stages diverge")
     V = v + h * (GL_A @ K)
+    if accels is not None:
+        accels[:] = [K[0], K[1]]
     if stages is not None:
         Qs = q + h * (GL_A @ V)
         stages[:] = [(t + GL_C[i] * h, *project(model, p, Qs[i], V[i], t + GL_C[i] * h)[:2])
                      for i in range(2)]
     return q + h * (GL_B @ V), v + h * (GL_B @ K), K[1]
+
+
+def _rows(s: float, order: int) -> np.ndarray:
+    """The ``order``-th derivative in s of the monomials 1, s, ..., s^5 at s."""
+    j = np.arange(6)
+    coef = np.ones(6)
+    for k in range(order):
+        coef = coef * (j - k)
+    return coef * np.where(j >= order, float(s) ** np.maximum(j - order, 0), 0.0)
+
+
+def _weights(known: tuple[bool, bool]) -> np.ndarray:
+    """Inverse of the conditions' matrix of :func:`dense` (6 x 6): q and q' at both ends,
+    q'' at each end where ``known``, else the difference of q'' at the two Gauss nodes
+    (their mean adds nothing: the step's v1 - v0 is h times it, exactly for a quintic,
+    whose q'' Gauss' rule integrates exactly)."""
+    rows = [_rows(0.0, 0), _rows(0.0, 1), _rows(1.0, 0), _rows(1.0, 1)]
+    rows += [_rows(e, 2) for e, k in zip((0.0, 1.0), known, strict=True) if k]
+    if not all(known):
+        rows.append(_rows(GL_C[1], 2) - _rows(GL_C[0], 2))
+    return np.linalg.inv(np.array(rows))
+
+
+_WEIGHTS = {known: _weights(known) for known in ((True, True), (False, True), (True, False))}
+
+
+def dense(t0: float, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray | None, t1: float,
+          q1: np.ndarray, v1: np.ndarray, a1: np.ndarray | None, dk: np.ndarray,
+          t: float) -> tuple[np.ndarray, np.ndarray]:
+    """A Gauss step's state at t (s) inside it, read from its ends: the quintic in t with
+    the positions q, velocities v = q' and accelerations a = q'' of both ends; at an end
+    where the acceleration is undetermined (the singular instant: None), the difference
+    ``dk`` of the step's two stage accelerations (K2 - K1) instead. Returns (q, v).
+
+    Its error is O(h^6) in q and O(h^5) in v, the order of the step's own local error: on
+    A02 with 1 and 8 loops at rtol 1e-6 to 1e-10 the samples inside the crossings kept
+    their error against the reference to three digits, against those of a Gauss step
+    from the nearer end (about ten projected KKT solves each, 37 ms a sample with 32
+    loops). The values may be states (nq,) or their tangents (nq, P): the quintic is
+    linear in them."""
+    h = t1 - t0
+    s = (t - t0) / h
+    W = _WEIGHTS[(a0 is not None, a1 is not None)]
+    data = [q0, h * v0, q1, h * v1] + [h * h * a for a in (a0, a1) if a is not None]
+    if a0 is None or a1 is None:
+        data.append(h * h * dk)
+    C = np.tensordot(W, np.array(data), axes=1)  # the quintic's coefficients in s
+    return (np.tensordot(_rows(s, 0), C, axes=1),
+            np.tensordot(_rows(s, 1), C, axes=1) / h)
 
 
 def accurate_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,

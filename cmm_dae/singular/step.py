@@ -31,7 +31,7 @@ motion, by continuity of velocity).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,7 +52,7 @@ from .approach import (  # noqa: F401 (the crossing's thresholds, importable fro
     ratio,
 )
 from .branches import choose_branch, other_branches
-from .gauss import accurate_step, gl2_step, project
+from .gauss import accurate_step, dense, gl2_step, project
 from .instant import singular_instant
 
 #: The crossing ends where the singular-value ratio is this many times the one at its start.
@@ -91,37 +91,47 @@ class Crossing:
     #: already); ``t_singular`` is then where that instant extrapolates to, and nothing
     #: is to be logged.
     instant: bool = True
+    #: Per step of :attr:`ends`: its two stage accelerations' difference (K2 - K1; None
+    #: for a branch switch's repeated instant), for :meth:`state_at`.
+    dk: tuple = ()
+    _accels: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def t0(self) -> float:
         """Time of the state handed over, s."""
         return self.ends[0][0]
 
-    def start_for(self, t: float) -> int:
-        """The step end a sample at t inside the crossing is stepped from: the nearer end
-        of its step, never the singular instant (where the accelerations are
-        undetermined; a branch switch repeats that instant, and its second entry, with
-        the new velocities, serves the step after it)."""
+    def interval(self, t: float) -> int:
+        """The step (index into :attr:`ends` of its start) that holds the time t (s): the
+        first of positive length reaching t, the first or last one for a t before or
+        beyond them."""
         e = self.ends
-        k = next((k for k in range(len(e) - 1) if e[k][0] <= t < e[k + 1][0]), len(e) - 2)
-        k = max(k, 0)
-        near_end = abs(e[k + 1][0] - t) < abs(t - e[k][0])
-        at_singular = [abs(e[i][0] - self.t_singular) <= 1e-12 * max(1.0, abs(t))
-                       for i in (k, k + 1)]
-        if at_singular[0] or (near_end and not at_singular[1]):
-            return k + 1
-        return k
+        steps = [k for k in range(len(e) - 1) if e[k + 1][0] > e[k][0]]
+        return next((k for k in steps if t <= e[k + 1][0]), steps[-1])
+
+    def end_accel(self, model: Model, p: np.ndarray, i: int) -> np.ndarray | None:
+        """The accelerations at the step end ``ends[i]`` projected onto the constraints
+        (kept once computed), None at the singular instant, where they are undetermined
+        (the end :attr:`n_before` steps in, and its repetition after a branch switch)."""
+        if self.n_before >= 1 and i in (self.n_before, self.n_before + int(self.switched)):
+            return None
+        if i not in self._accels:
+            t, q, v = self.ends[i]
+            q1, v1, _ = project(model, p, q, v, t)
+            self._accels[i] = model.kkt(q1, v1, t, p)[0]
+        return self._accels[i]
 
     def state_at(self, model: Model, p: np.ndarray, t: float
                  ) -> tuple[np.ndarray, np.ndarray]:
-        """Positions and velocities at t inside the crossing: one Gauss step (forwards or
-        backwards) from the step end :meth:`start_for` picks, as accurate as the
-        crossing's own steps, projected onto the constraints (the steps' ends are not:
-        on a long way out they drift by up to 2e-7 m at rtol 1e-10)."""
-        t0, q0, v0 = self.ends[self.start_for(t)]
-        if t != t0:
-            q0, v0, _ = gl2_step(model, p, t0, q0, v0, t - t0, model.kkt(q0, v0, t0, p)[0])
-        return project(model, p, q0, v0, t)[:2]
+        """Positions and velocities at t inside the crossing: its step there read through
+        (:func:`~cmm_dae.singular.gauss.dense`, as accurate as the step), projected onto
+        the constraints (the steps' ends are not: on a long way out they drift by up to
+        2e-7 m at rtol 1e-10)."""
+        k = self.interval(t)
+        (t0, q0, v0), (t1, q1, v1) = self.ends[k], self.ends[k + 1]
+        q, v = dense(t0, q0, v0, self.end_accel(model, p, k), t1, q1, v1,
+                     self.end_accel(model, p, k + 1), self.dk[k], t)
+        return project(model, p, q, v, t)[:2]
 
 
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
@@ -180,16 +190,17 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     plan = (plan_behind(st, rtol, atol, t_min) if past
             else plan_ahead(st, rtol, atol, node_ratio))
     try:
-        tt, qq, vv, taken, ends, switched = _march(st, plan, t_end, rtol, atol)
+        tt, qq, vv, taken, ends, switched, dk = _march(st, plan, t_end, rtol, atol)
     except np.linalg.LinAlgError as e:
         raise st.dead(f"the motion cannot be continued through it ({e})") from None
-    return _arrive(st, plan, tt, qq, vv, taken, ends, switched, t_end, t_min)
+    return _arrive(st, plan, tt, qq, vv, taken, (ends, dk), switched, t_end, t_min)
 
 
 def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tuple:
     """The Gauss steps to the instant (a branch rule applied there) and out until the
     ratio reaches the target or turns down: (t, q, v) at the end, the steps taken, their
-    ends (the start first) and whether the branch was switched."""
+    ends (the start first), whether the branch was switched and the steps' stage
+    accelerations' differences."""
     model, p, r0, rate, nsub = st.model, st.p, st.r0, st.rate, plan.nsub
     h, tau = plan.h, plan.tau
     # Constant steps on the way out, unless the way out (to a ratio where the integrators
@@ -209,13 +220,16 @@ def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tup
     r_prev = 0.0
     taken: list[float] = []
     ends = [(st.t, st.q, st.v)]
+    dk: list = []  # per step: its stage accelerations' difference (Crossing.dk)
+    stage_accels: list = []
     for k in range(nsub + MAX_STEPS_OUT + 200):
         if tt + h > t_end:
             h = t_end - tt
-        qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess)
+        qq, vv, guess = gl2_step(model, p, tt, qq, vv, h, guess, accels=stage_accels)
         taken.append(h)
         tt += h
         ends.append((tt, qq, vv))
+        dk.append(stage_accels[1] - stage_accels[0])
         if k == nsub - 1 and st.rule is not None:  # at the singular instant: which way
             qs, vs, _ = project(model, p, qq, vv, tt, rcond=SINGULAR_RCOND)
             others = other_branches(model, p, tt, qs, vs)
@@ -223,6 +237,7 @@ def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tup
             if switched:  # else the motion goes on undisturbed
                 qq, vv = qs, vnew
                 ends.append((tt, qq, vv))  # the same instant again: the new branch
+                dk.append(None)
         if k >= nsub - 1:
             r_now = ratio(model, qq, tt, p)
             # out at the target, or where the conditioning is best (it turns down before
@@ -237,16 +252,18 @@ def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tup
                 h_max = max(h_max, min(accurate_step(model, p, tt, qq, vv, h, guess,
                                                       rtol, atol), 0.25 * way_out))
             h = min(h * grow, max(h, h_max))
-    return tt, qq, vv, taken, ends, switched
+    return tt, qq, vv, taken, ends, switched, dk
 
 
 def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
-            taken: list[float], ends: list, switched: bool, t_end: float,
+            taken: list[float], steps: tuple[list, list], switched: bool, t_end: float,
             t_min: float) -> Crossing:
     """The state after the crossing projected and checked (the motion went on: the
     constraints close, the velocities did not jump, the ratio recovered), the rank drop
-    and the instant located along the Gauss steps: the :class:`Crossing`."""
+    and the instant located along the Gauss steps: the :class:`Crossing`. ``steps``: the
+    step ends and their stage accelerations' differences."""
     model, p, t, r0, nsub = st.model, st.p, st.t, st.r0, plan.nsub
+    ends, dk = steps
 
     def failed(why: str) -> SolverError:
         # where the Gauss steps reached the "instant" the constraints had not collapsed
@@ -294,4 +311,4 @@ def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
     way_out_only = plan.past and plan.leaving
     return Crossing(t - plan.tau_back if way_out_only else t_s, tt, q1, v1, labels, drop,
                     plan.r_min, jump, switched, tuple(taken), nsub, tuple(ends),
-                    instant=not way_out_only)
+                    instant=not way_out_only, dk=tuple(dk))
