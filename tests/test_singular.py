@@ -112,10 +112,15 @@ def test_a02_n48_crosses_both_singular_positions_of_a_long_chain():
     sing = [e for e in res.events if e.kind == "singular"]
     assert len(sing) == 2
     inertia, c = (n + 1) / 3 + n, 9.81 * ((n + 1) / 2 + n)
-    for e, target in zip(sing, (0.0, -math.pi), strict=True):
+    # The second instant is found by a crossing started 0.15 s back, where the ratio
+    # falls at 0.045 / s: the run's own state error (rtol 1e-8) moves it by up to 1e-7 s.
+    # Measured at rtol 0.9e-8, 1e-8, 1.1e-8: first within 1.2e-8 s, second within 5e-8
+    # s before 2026-11-26 and 9.7e-8 s after (a change in the last digits of the first
+    # crossing changed where IDA gave up before the second; round-off, not accuracy).
+    for e, target, tol in zip(sing, (0.0, -math.pi), (5e-8, 2e-7), strict=True):
         t_ref = quad(lambda p: math.sqrt(inertia / 2 / (inertia / 2 + c * (1 - math.sin(p)))),
                      target, math.pi / 2, epsabs=1e-14, epsrel=1e-13)[0]
-        assert abs(e.t - t_ref) <= 5e-8  # measured 3e-9 and 1.1e-8 s
+        assert abs(e.t - t_ref) <= tol
     err = np.max(np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(n, res.t)).T))
     assert err <= 5e-7  # measured 3.9e-8 m (2 s)
 

@@ -10,8 +10,8 @@ singular-position logic of both integrators."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import eig_banded
 from scipy.linalg import null_space as _null_space
+from scipy.linalg.lapack import dsbev
 
 __all__ = ["BANDED_TRUSTED", "COLLAPSE", "RANK_TOL", "band_ratio", "collapsed", "dependent",
            "null_space", "rank", "ratio"]
@@ -52,12 +52,16 @@ def ratio(J: np.ndarray) -> float:
 def band_ratio(lower: np.ndarray) -> float:
     """:func:`ratio` of the rows J from the lower band (LAPACK's storage: ``lower[i - j, j]``
     for i >= j) of their Gram matrix J J^T, reordered to a narrow band: the square root of
-    its extreme eigenvalues' ratio (LAPACK's dsbevx, O(rows^2 band) against the SVD's
+    its extreme eigenvalues' ratio (LAPACK's dsbev, O(rows^2 band) against the SVD's
     O(rows^3): 72 ms for the 770 rows of A02 with 128 loops). Trusted down to
     :data:`BANDED_TRUSTED`."""
-    m = lower.shape[1]
-    lo, hi = (float(eig_banded(lower, lower=True, eigvals_only=True, select="i",
-                               select_range=(k, k))[0]) for k in (0, m - 1))
+    # all eigenvalues in one call (dsbev: one reduction to tridiagonal form, then its
+    # QR iteration) took a third of the time of the two selected ones (dsbevx, a
+    # reduction each): 1.6 against 5.1 ms on A02 with 32 loops
+    w, _, info = dsbev(lower, compute_v=0, lower=1)
+    if info != 0:
+        return 0.0
+    lo, hi = float(w[0]), float(w[-1])
     return float(np.sqrt(lo / hi)) if hi > 0.0 and lo > 0.0 else 0.0
 
 

@@ -183,13 +183,16 @@ def plan_ahead(st: Start, rtol: float, atol: float, node_ratio: float) -> Plan:
     """The instant ahead along the motion, and the Gauss steps to it."""
     model, p, t, r0 = st.model, st.p, st.t, st.r0
     tau_lin = r0 / -st.rate
-    opt = minimize_scalar(lambda s: ratio(model, st.path(s), t + s, p),
+    # on the ratio's square, a parabola at its minimum, where the ratio is a V: Brent's
+    # parabolic steps took 8-9 evaluations (an SVD each) on A02 with 1 to 32 loops at
+    # rtol 1e-3 to 1e-10, against 21-25 on the V, the minimum found at least as low
+    opt = minimize_scalar(lambda s: ratio(model, st.path(s), t + s, p) ** 2,
                           bounds=(0.0, 3.0 * tau_lin), method="bounded",
                           options={"xatol": 1e-6 * tau_lin})
-    tau = float(opt.x)
+    tau, r_min = float(opt.x), math.sqrt(float(opt.fun))
     if not 0.0 < tau < 2.9 * tau_lin:
         raise st.dead("no singular instant was found ahead")
-    if opt.fun > NO_COLLAPSE * r0:
+    if r_min > NO_COLLAPSE * r0:
         raise st.not_singular("ahead")
     t_s = t + tau
     # Gauss steps of tau / nsub: the singular instant is a step end; then on until the
@@ -209,10 +212,10 @@ def plan_ahead(st: Start, rtol: float, atol: float, node_ratio: float) -> Plan:
         # point); along the Gauss steps themselves 8e-9.
         nsub = max(nsub, 1)
         tau = _instant_ahead(model, p, t, st.q, st.v, st.a0, tau, nsub)
-        return Plan(False, False, tau, 0.0, float(opt.fun), t_s, nsub, tau / nsub, h_ok)
+        return Plan(False, False, tau, 0.0, r_min, t_s, nsub, tau / nsub, h_ok)
     # The integrator came so close that even a step ending at the singular instant
     # would put a node in the round-off zone: one step over it instead, long enough for
     # both nodes to lie beyond it at a safe ratio (the collocation polynomial spans the
     # instant; the accelerations are not needed there).
     h = (tau + 20.0 * node_ratio / -st.rate) / GL_C[0]
-    return Plan(False, False, tau, 0.0, float(opt.fun), t_s, 0, h, min(h_ok, h))
+    return Plan(False, False, tau, 0.0, r_min, t_s, 0, h, min(h_ok, h))
