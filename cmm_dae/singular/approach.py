@@ -202,20 +202,24 @@ def plan_ahead(st: Start, rtol: float, atol: float, node_ratio: float) -> Plan:
     # came close, so that no Gauss node falls where the accelerations are dominated by
     # the round-off the near-singular solve amplifies (the node nearest it lies 0.211 h
     # away, where the ratio is about r0 * 0.211 / nsub).
+    cap = int(r0 * 0.211 / node_ratio)
+    if st.rule is None and cap < 2:
+        # The integrator came so close that even a step ending at the singular instant
+        # would put a node in the round-off zone: one step over it instead, long enough
+        # for both nodes to lie beyond it at a safe ratio (the collocation polynomial
+        # spans the instant; the accelerations are not needed there). Its length is set
+        # by the nodes' distance from the instant and the steps out never shorten
+        # (_march), so no accurate step is estimated: it would change no step, and its
+        # step doubling took 3 of the 5 Gauss steps of a crossing of A02 with 8 loops at
+        # rtol 1e-4.
+        h = (tau + 20.0 * node_ratio / -st.rate) / GL_C[0]
+        return Plan(False, False, tau, 0.0, r_min, t_s, 0, h, h)
+    # A step must end at the instant itself: a branch rule is applied there, and a Gauss
+    # node must not fall next to it. tau from the second-order path was 3e-4 s off on A02
+    # with 40 loops at rtol 1e-11 (0.09 s ahead), a node then came within round-off range
+    # of the instant and the velocities jumped by 1.8e-5 (a dead point); along the Gauss
+    # steps themselves 8e-9.
     h_ok = accurate_step(model, p, t, st.q, st.v, tau / SUBSTEPS, st.a0, rtol, atol)
-    nsub = min(max(SUBSTEPS, math.ceil(tau / h_ok)), int(r0 * 0.211 / node_ratio))
-    if st.rule is not None or nsub >= 2:
-        # A step must end at the instant itself: a branch rule is applied there, and a
-        # Gauss node must not fall next to it. tau from the second-order path was 3e-4 s
-        # off on A02 with 40 loops at rtol 1e-11 (0.09 s ahead), a node then came within
-        # round-off range of the instant and the velocities jumped by 1.8e-5 (a dead
-        # point); along the Gauss steps themselves 8e-9.
-        nsub = max(nsub, 1)
-        tau = _instant_ahead(model, p, t, st.q, st.v, st.a0, tau, nsub)
-        return Plan(False, False, tau, 0.0, r_min, t_s, nsub, tau / nsub, h_ok)
-    # The integrator came so close that even a step ending at the singular instant
-    # would put a node in the round-off zone: one step over it instead, long enough for
-    # both nodes to lie beyond it at a safe ratio (the collocation polynomial spans the
-    # instant; the accelerations are not needed there).
-    h = (tau + 20.0 * node_ratio / -st.rate) / GL_C[0]
-    return Plan(False, False, tau, 0.0, r_min, t_s, 0, h, min(h_ok, h))
+    nsub = max(min(max(SUBSTEPS, math.ceil(tau / h_ok)), cap), 1)
+    tau = _instant_ahead(model, p, t, st.q, st.v, st.a0, tau, nsub)
+    return Plan(False, False, tau, 0.0, r_min, t_s, nsub, tau / nsub, h_ok)
