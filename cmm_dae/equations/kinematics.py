@@ -12,7 +12,7 @@ import scipy.sparse.linalg as spl
 from scipy.linalg import qr, solve_triangular
 from scipy.linalg.lapack import dpbtrf
 
-from . import banded, rank
+from . import banded, bandsvd, rank
 from .build import Constraints
 from .model import Model
 from .unknowns import ground_pins
@@ -200,18 +200,32 @@ def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: 
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     """Smallest over largest singular value of the active constraint rows at q (0 when
     they are dependent): :func:`dependent_rows`' measure alone, without the singular
-    vectors (several times cheaper on large constraint sets). Where the rows' Gram matrix
-    has a narrow band (a long chain: bandwidth 5), from that band
-    (:func:`cmm_dae.equations.rank.band_ratio`, on the banded structure the KKT module
-    keeps for the model and these rows) down to its trusted ratio, else by the SVD."""
+    vectors. Where the rows are many and banded once reordered (a long chain), from their
+    band (:mod:`cmm_dae.equations.bandsvd`: as accurate as the SVD, at O(rows^2 band)
+    against its O(rows^3)), else by the dense SVD."""
     act = model.active_rows(p)
     J = model.constraints(q, t, p).Phi_q[act]
-    band = _gram_band(model, act) if act.size <= model.nq else None
-    if band is not None:
-        r = rank.band_ratio(_gram_lower(band, J[band.rows, band.cols][None])[0])
-        if r >= rank.BANDED_TRUSTED:
+    st = _svd_band(model, act) if 0 < act.size <= model.nq else None
+    if st is not None:
+        r = bandsvd.ratio(st, J[st.rows, st.cols])
+        if r is not None:
             return r
     return rank.ratio(J)
+
+
+def _svd_band(model: Model, act: np.ndarray) -> bandsvd.BandSVD | None:
+    """The band structure of the active rows' Jacobian (:func:`bandsvd.structure`), kept
+    per model and row set; None for fewer than :data:`SPARSE_ROWS` rows or a wide band
+    (more than :data:`banded.BAND_SHARE` of the rows)."""
+    nz = active_nonzeros(model, act)
+    if nz is None:
+        return None
+    per_model = _STRUCTURES[model]  # filled by active_nonzeros
+    key = ("svd band", act.tobytes())
+    if key not in per_model:
+        st = bandsvd.structure(nz[0], nz[1], act.size, model.nq)
+        per_model[key] = st if st.kl + st.ku <= 2 * banded.BAND_SHARE * act.size else None
+    return per_model[key]
 
 
 def _gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:

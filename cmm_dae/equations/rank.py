@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import null_space as _null_space
-from scipy.linalg.lapack import dsbev
 
-__all__ = ["BANDED_TRUSTED", "COLLAPSE", "RANK_TOL", "band_ratio", "collapsed", "dependent",
-           "null_space", "rank", "ratio"]
+__all__ = ["COLLAPSE", "RANK_TOL", "collapsed", "dependent", "null_space", "rank", "ratio"]
 
 #: Relative size (to the largest) below which a singular value counts as zero: the
 #: numerical rank, dependent rows, the null space. Rows this close to dependent cannot be
@@ -30,13 +28,6 @@ def singular_values(J: np.ndarray) -> np.ndarray:
     return np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(0)
 
 
-#: A ratio from :func:`band_ratio` is trusted down to this: its eigenvalues are those of
-#: J J^T, the squares of J's singular values, exact to round-off of the largest, so a ratio
-#: r comes out with a relative error of about 1e-16 / r^2 (6.5e-9 at r = 7e-5 on A02 with
-#: 32 loops); below it the SVD's own ratio is taken (where a singular instant is located).
-BANDED_TRUSTED = 1e-4
-
-
 def ratio(J: np.ndarray) -> float:
     """Smallest over largest singular value of the rows ``J`` (n_rows, n_coords): 1 for no
     rows (nothing can be dependent), 0 for more rows than coordinates (they must be) or a
@@ -47,22 +38,6 @@ def ratio(J: np.ndarray) -> float:
         return 0.0
     s = singular_values(J)
     return float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
-
-
-def band_ratio(lower: np.ndarray) -> float:
-    """:func:`ratio` of the rows J from the lower band (LAPACK's storage: ``lower[i - j, j]``
-    for i >= j) of their Gram matrix J J^T, reordered to a narrow band: the square root of
-    its extreme eigenvalues' ratio (LAPACK's dsbev, O(rows^2 band) against the SVD's
-    O(rows^3): 72 ms for the 770 rows of A02 with 128 loops). Trusted down to
-    :data:`BANDED_TRUSTED`."""
-    # all eigenvalues in one call (dsbev: one reduction to tridiagonal form, then its
-    # QR iteration) took a third of the time of the two selected ones (dsbevx, a
-    # reduction each): 1.6 against 5.1 ms on A02 with 32 loops
-    w, _, info = dsbev(lower, compute_v=0, lower=1)
-    if info != 0:
-        return 0.0
-    lo, hi = float(w[0]), float(w[-1])
-    return float(np.sqrt(lo / hi)) if hi > 0.0 and lo > 0.0 else 0.0
 
 
 def rank(J: np.ndarray, tol: float = RANK_TOL) -> int:

@@ -378,24 +378,3 @@ def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nd
         return end
     rec.truncate(cut[0])
     return cut[1]
-
-
-#: Two records of a singular instant closer than this (relative to the time, s) are one.
-TWIN_INSTANT = 1e-6
-
-
-def drop_twin_passage(events: list, after: list[int], passed: list[tuple[float, int]],
-                       cr) -> None:
-    """A singular position IDA integrated through (found in its samples) and then, IDA
-    failing right after it, crossed from its last state: one instant, logged once, by the
-    crossing (A02 at rtol 1e-8 with IDA's own steps logged 1.2152617825 s twice, 2e-11 s
-    apart). The passage's event, its sample index and its entry in ``passed`` go."""
-    # the same instant to well within what either finds it to (the passage on the
-    # samples' interpolant, the crossing along its Gauss steps); two singular positions a
-    # microsecond apart are one event to any integrator
-    if not passed or abs(passed[-1][0] - cr.t_singular) > TWIN_INSTANT * max(1.0, cr.t_after):
-        return
-    t_p = passed.pop()[0]
-    i = next(i for i in range(len(events) - 2, -1, -1)
-             if events[i].kind == "singular" and events[i].t == t_p)
-    del events[i], after[i]

@@ -35,9 +35,9 @@ from ..integrators.iterative import IterativeIntegrator
 from ..results.post import build_result
 from ..results.result import Result
 from .cache import model_of
-from .crossing import cross_singular, log_stepped_over
+from .crossing import cross_singular, drop_twin_passage, log_stepped_over
 from .options import IDA_DEFAULTS, ITERATIVE_DEFAULTS, branch_rule, check_options
-from .passage import drop_twin_passage, passage_cut, watch_segment
+from .passage import passage_cut, watch_segment
 
 #: The integration methods, by name.
 METHODS: dict[str, type[Integrator]] = {"ida": IdaIntegrator, "iterative": IterativeIntegrator}

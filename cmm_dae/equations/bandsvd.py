@@ -1,0 +1,119 @@
+"""The singular values of a large constraint Jacobian from its band: a chain of loops has
+Phi_q banded once its rows and columns are reordered, and LAPACK reduces a band matrix to
+bidiagonal form in O(n^2 band) (``dgbbrd``) and takes a bidiagonal's singular values to
+high relative accuracy (``dlasq1``), where the dense SVD costs O(n^3).
+
+The two routines are not wrapped by ``scipy.linalg.lapack``; they are called through the
+function pointers that ``scipy.linalg.cython_lapack`` exports (the LAPACK scipy itself is
+built with). Where that is not available, :func:`ratio` returns None and the caller takes
+the dense SVD.
+
+Measured on the Jacobians of A02's crossings (194 x 195 rows with 32 loops, 770 x 771
+with 128): the ratio within 3.6e-17 of the SVD's (both are backward stable: their error
+is round-off times the largest singular value), in 2.3 against 4.3 ms with 32 loops and
+30 against 138 ms with 128.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.linalg import cython_lapack
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+__all__ = ["BandSVD", "ratio", "structure"]
+
+
+@dataclass(frozen=True)
+class BandSVD:
+    """Where Phi_q's structural nonzeros go in LAPACK's band storage of its reordered rows
+    and columns (``ab[j, ku + i - j]`` for new row i and column j, C order)."""
+
+    rows: np.ndarray   # (nnz,) row of each structural nonzero (of the rows taken)
+    cols: np.ndarray   # (nnz,) its column
+    flat: np.ndarray   # (nnz,) its flat index in the band storage (n, kl + ku + 1)
+    m: int
+    n: int
+    kl: int
+    ku: int
+
+
+def structure(rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> BandSVD:
+    """The band structure of an m x n matrix with structural nonzeros at (rows, cols): rows
+    and columns ordered together by reverse Cuthill-McKee on the graph of the matrix and
+    its transpose ([[0, J], [J^T, 0]]), each in the order it takes there."""
+    a = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(m, n))
+    order = np.asarray(reverse_cuthill_mckee(sp.bmat([[None, a], [a.T, None]]).tocsr(),
+                                             symmetric_mode=True), dtype=int)
+    rpos, cpos = np.empty(m, dtype=int), np.empty(n, dtype=int)
+    rpos[order[order < m]] = np.arange(m)
+    cpos[order[order >= m] - m] = np.arange(n)
+    i, j = rpos[rows], cpos[cols]
+    kl = int(max(np.max(i - j, initial=0), 0))
+    ku = int(max(np.max(j - i, initial=0), 0))
+    return BandSVD(rows, cols, j * (kl + ku + 1) + ku + i - j, m, n, kl, ku)
+
+
+@functools.cache
+def _lapack() -> tuple | None:
+    """(dgbbrd, dlasq1) as ctypes functions, or None where scipy does not export them."""
+    try:
+        caps = cython_lapack.__pyx_capi__
+        name = ctypes.pythonapi.PyCapsule_GetName
+        name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+        pointer = ctypes.pythonapi.PyCapsule_GetPointer
+        pointer.restype, pointer.argtypes = ctypes.c_void_p, [ctypes.py_object,
+                                                              ctypes.c_char_p]
+
+        def address(routine: str) -> int:
+            cap = caps[routine]
+            return pointer(cap, name(cap))
+
+        i, p = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+        gbbrd = ctypes.CFUNCTYPE(None, ctypes.c_char_p, i, i, i, i, i, p, i, p, p, p, i, p, i,
+                                 p, i, p, i)(address("dgbbrd"))
+        lasq1 = ctypes.CFUNCTYPE(None, i, p, p, p, i)(address("dlasq1"))
+    except (AttributeError, KeyError, ValueError):
+        return None
+    return gbbrd, lasq1
+
+
+def _int(x: int) -> ctypes.c_int:
+    return ctypes.c_int(x)
+
+
+def ratio(st: BandSVD, values: np.ndarray) -> float | None:
+    """Smallest over largest singular value of the matrix whose structural nonzeros are
+    ``values`` (at ``st.rows``, ``st.cols``); 0 for a zero matrix; None where LAPACK's
+    routines are not available or fail (non-finite values): the dense SVD decides."""
+    routines = _lapack()
+    if routines is None or not np.all(np.isfinite(values)):
+        return None
+    gbbrd, lasq1 = routines
+    m, n, kl, ku = st.m, st.n, st.kl, st.ku
+    k = min(m, n)
+    if k == 0:
+        return 1.0
+    ab = np.zeros((n, kl + ku + 1))  # Fortran's (kl + ku + 1, n)
+    ab.flat[st.flat] = values
+    d = np.empty(k)
+    e = np.zeros(max(k - 1, 1))
+    work = np.empty(max(2 * max(m, n), 4 * k))
+    one = np.zeros(1)  # Q, P^T and C are not formed
+    info = _int(0)
+    ref = ctypes.byref
+    gbbrd(b"N", ref(_int(m)), ref(_int(n)), ref(_int(0)), ref(_int(kl)), ref(_int(ku)),
+          ab.ctypes.data, ref(_int(kl + ku + 1)), d.ctypes.data, e.ctypes.data,
+          one.ctypes.data, ref(_int(1)), one.ctypes.data, ref(_int(1)), one.ctypes.data,
+          ref(_int(1)), work.ctypes.data, ref(info))
+    if info.value != 0:
+        return None
+    lasq1(ref(_int(k)), d.ctypes.data, e.ctypes.data, work.ctypes.data, ref(info))
+    if info.value != 0:
+        return None
+    # dlasq1 leaves the singular values in decreasing order
+    return float(d[-1] / d[0]) if d[0] > 0.0 else 0.0

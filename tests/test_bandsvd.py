@@ -1,0 +1,76 @@
+"""The singular-value ratio from a reordered band (LAPACK's dgbbrd and dlasq1 through
+scipy's cython_lapack) against numpy's dense SVD, which is independent of it (LAPACK's
+dgesdd on the whole matrix): both are backward stable, so the ratios agree to round-off
+times the largest singular value, absolute."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cmm_dae.description import iftomm
+from cmm_dae.equations import bandsvd, kinematics, rank
+from cmm_dae.simulation.runner import run_dae
+from cmm_dae.singular import approach
+
+
+def _shuffled_band(rng: np.random.Generator, m: int, n: int, kl: int, ku: int
+                   ) -> np.ndarray:
+    """A random m x n band matrix, its rows and columns shuffled (the band hidden)."""
+    A = np.zeros((m, n))
+    for i in range(m):
+        lo, hi = max(i - kl, 0), min(i + ku + 1, n)
+        A[i, lo:hi] = rng.standard_normal(hi - lo)
+    return A[rng.permutation(m)][:, rng.permutation(n)]
+
+
+def _ratio(A: np.ndarray) -> float | None:
+    rows, cols = np.nonzero(A)
+    st = bandsvd.structure(rows, cols, *A.shape)
+    return bandsvd.ratio(st, A[rows, cols])
+
+
+@pytest.mark.parametrize(("m", "n", "kl", "ku"), [(120, 121, 2, 3), (150, 150, 4, 4),
+                                                   (90, 130, 1, 6), (1, 4, 0, 3)])
+def test_band_ratio_is_the_svds(m, n, kl, ku):
+    rng = np.random.default_rng(m + n)
+    A = _shuffled_band(rng, m, n, kl, ku)
+    s = np.linalg.svd(A, compute_uv=False)
+    assert _ratio(A) == pytest.approx(s[-1] / s[0], rel=1e-10, abs=1e-14)
+
+
+def test_band_ratio_of_nearly_dependent_rows():
+    """Two rows made dependent but for 1e-12: a ratio of about 1e-13, found to round-off
+    (the Gram matrix's eigenvalues, squared singular values, cannot resolve it)."""
+    rng = np.random.default_rng(7)
+    A = _shuffled_band(rng, 100, 101, 2, 2)
+    i, j = np.flatnonzero(A[:, np.flatnonzero(A[0])[0]])[:2]  # two rows sharing a column
+    A[j] = A[i] * 2.0
+    A[j, np.flatnonzero(A[i])[0]] += 1e-12
+    s = np.linalg.svd(A, compute_uv=False)
+    assert s[-1] / s[0] < 1e-12
+    assert abs(_ratio(A) - s[-1] / s[0]) <= 1e-15
+
+
+def test_band_ratio_refuses_non_finite_values():
+    A = _shuffled_band(np.random.default_rng(3), 100, 101, 1, 1)
+    A[np.nonzero(A)[0][5], np.nonzero(A)[1][5]] = np.nan
+    assert _ratio(A) is None
+
+
+def test_singular_ratio_of_a_long_chain_near_its_singular_position(monkeypatch):
+    """A02 with 32 loops (194 constraint rows): at every state the crossing of its
+    singular position asked about, the banded ratio against the dense SVD's of the same
+    Jacobian."""
+    seen: list[tuple[float, float]] = []
+
+    def spy(model, q, t, p):
+        J = model.constraints(q, t, p).Phi_q[model.active_rows(p)]
+        seen.append((kinematics.singular_ratio(model, q, t, p), rank.ratio(J)))
+        return seen[-1][0]
+
+    monkeypatch.setattr(approach, "ratio", spy)
+    run_dae(iftomm.a02_four_bar(32), 0.8, rtol=1e-3, compiled=False)
+    assert len(seen) >= 5  # 9: the search for the instant ahead
+    assert min(b for _, b in seen) < 1e-9  # it did come to the singular position
+    assert max(abs(a - b) for a, b in seen) <= 1e-15
