@@ -211,13 +211,31 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 break
         if best is not None and best[0] < PASSAGE_RATIO:
             r_min, x, a = best
-            j = a
-            while j > 0 and r(j) < START_RATIO:
-                j -= 1
-            found.append(Passage(j, a, float(t[a] + x * (t[a + 1] - t[a])), r_min))
+            t_s = float(t[a] + x * (t[a + 1] - t[a]))
+            found.append(Passage(_start_before(a, r), a, t_s, r_min))
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
+
+
+def _start_before(a: int, r) -> int:
+    """The last sample at or before ``a`` whose ratio ``r(i)`` is at least :data:`START_RATIO`
+    (0 where none is): 1, 2, 4, ... samples back, then the last gap halved, the ratio rising
+    back from a passage (sample by sample, A02 with 128 loops took 146 ratios of 47 ms)."""
+    if r(a) >= START_RATIO or a == 0:
+        return a
+    below, step = a, 1  # r(below) < START_RATIO
+    while (j := max(below - step, 0)) > 0 and r(j) < START_RATIO:
+        below, step = j, 2 * step
+    if r(j) < START_RATIO:
+        return 0
+    while below - j > 1:  # r(j) >= START_RATIO > r(below)
+        mid = (j + below) // 2
+        if r(mid) >= START_RATIO:
+            j = mid
+        else:
+            below = mid
+    return j
 
 
 def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
