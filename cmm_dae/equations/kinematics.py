@@ -214,30 +214,30 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
 
 
 def _svd_band(model: Model, act: np.ndarray) -> bandsvd.BandSVD | None:
-    """The band structure of the active rows' Jacobian (:func:`bandsvd.structure`), kept
-    per model and row set; None for fewer than :data:`SPARSE_ROWS` rows or a wide band
-    (more than :data:`banded.BAND_SHARE` of the rows)."""
-    nz = active_nonzeros(model, act)
-    if nz is None:
-        return None
-    per_model = _STRUCTURES[model]  # filled by active_nonzeros
-    key = ("svd band", act.tobytes())
-    if key not in per_model:
-        st = bandsvd.structure(nz[0], nz[1], act.size, model.nq)
-        per_model[key] = st if st.kl + st.ku <= 2 * banded.BAND_SHARE * act.size else None
-    return per_model[key]
+    """The band structure of the active rows' Jacobian (:func:`bandsvd.structure`); None
+    for a wide band (more than :data:`banded.BAND_SHARE` of the rows), see :func:`_kept`."""
+    def build(rows: np.ndarray, cols: np.ndarray) -> bandsvd.BandSVD | None:
+        st = bandsvd.structure(rows, cols, act.size, model.nq)
+        return st if st.kl + st.ku <= 2 * banded.BAND_SHARE * act.size else None
+    return _kept(model, act, "svd band", build)
 
 
 def _gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:
     """The banded structure of the active rows' Gram matrix (:func:`banded.structure` with
-    unit masses), kept per model and row set; None for few rows or a wide band."""
+    unit masses); None for a wide band, see :func:`_kept`."""
+    return _kept(model, act, "band", lambda rows, cols: banded.structure(rows, cols, act.size))
+
+
+def _kept(model: Model, act: np.ndarray, kind: str, build):
+    """``build(rows, cols)`` of the active rows' structural nonzeros, kept per model, row
+    set and ``kind``; None for fewer than :data:`SPARSE_ROWS` rows."""
     nz = active_nonzeros(model, act)
     if nz is None:
         return None
     per_model = _STRUCTURES[model]  # filled by active_nonzeros
-    key = ("band", act.tobytes())
+    key = (kind, act.tobytes())
     if key not in per_model:
-        per_model[key] = banded.structure(nz[0], nz[1], act.size)
+        per_model[key] = build(*nz)
     return per_model[key]
 
 
