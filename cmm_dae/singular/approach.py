@@ -5,6 +5,7 @@ stepped across it), and the Gauss steps planned to it (:func:`plan_ahead`,
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -110,7 +111,6 @@ class Start:
     q: np.ndarray
     v: np.ndarray
     rule: tuple[str, int] | None
-    labels: list[str]
     r0: float  #: the singular-value ratio there
     a0: np.ndarray  #: the accelerations there
     vnorm: float
@@ -119,11 +119,18 @@ class Start:
     @classmethod
     def at(cls, model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
            rule: tuple[str, int] | None) -> Start:
-        labels, r0 = dependent_rows(model, q, t, p, tol=1.0)
+        r0 = ratio(model, q, t, p)
         a0 = model.kkt(q, v, t, p)[0]
         vnorm = float(np.max(np.abs(v), initial=0.0))
         rate = ratio_rate(model, p, t, q, v, a0, r0) if vnorm > 0.0 else 0.0
-        return cls(model, p, t, q, v, rule, labels, r0, a0, vnorm, rate)
+        return cls(model, p, t, q, v, rule, r0, a0, vnorm, rate)
+
+    @functools.cached_property
+    def labels(self) -> list[str]:
+        """The rows of the collapsing singular value's left singular vector: asked for
+        where one value collapses (a crossing of several names the rows of all of them;
+        the full SVD this takes cost 10 ms with 32 loops, 0.27 s with 128)."""
+        return dependent_rows(self.model, self.q, self.t, self.p, tol=1.0)[0]
 
     def path(self, tau: float) -> np.ndarray:
         """The motion ahead (tau > 0, s) or behind, to second order."""

@@ -287,12 +287,13 @@ def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
     if jump > 1e-5 or dq > 1e-6 * scale or (tt < t_end and r1 < r0):
         raise failed(f"the motion cannot continue through it (velocity change "
                      f"{jump:.1e} relative, singular-value ratio {r1:.1e} after it)")
-    t_s, labels = plan.t_s, st.labels
+    t_s = plan.t_s
     # counted where the Gauss steps reach the instant (the second-order path ahead is
     # off there by its error, enough to miss most of a large rank drop)
     drop = rank_drop(model, ends[nsub][1] if nsub >= 1 else st.path(plan.tau), t_s, p, r0)
-    if drop > 1:  # the rows of every collapsing singular value, not of the last alone
-        labels = dependent_rows(model, st.q, t, p, tol=1.0, drop=drop)[0]
+    # the rows of every collapsing singular value, not of the last alone
+    labels = (dependent_rows(model, st.q, t, p, tol=1.0, drop=drop)[0] if drop > 1
+              else st.labels)
     if not plan.past:  # the instant along the Gauss steps, not the second-order path
         t_s = singular_instant(model, p, ends, t_s)
     elif t_s > 0.0 and not plan.leaving:  # behind: a Gauss step back twice as far
