@@ -82,10 +82,6 @@ def _lapack() -> tuple | None:
     return gbbrd, lasq1
 
 
-def _int(x: int) -> ctypes.c_int:
-    return ctypes.c_int(x)
-
-
 def ratio(st: BandSVD, values: np.ndarray) -> float | None:
     """Smallest over largest singular value of the matrix whose structural nonzeros are
     ``values`` (at ``st.rows``, ``st.cols``); 0 for a zero matrix; None where LAPACK's
@@ -104,15 +100,17 @@ def ratio(st: BandSVD, values: np.ndarray) -> float | None:
     e = np.zeros(max(k - 1, 1))
     work = np.empty(max(2 * max(m, n), 4 * k))
     one = np.zeros(1)  # Q, P^T and C are not formed
-    info = _int(0)
-    ref = ctypes.byref
-    gbbrd(b"N", ref(_int(m)), ref(_int(n)), ref(_int(0)), ref(_int(kl)), ref(_int(ku)),
-          ab.ctypes.data, ref(_int(kl + ku + 1)), d.ctypes.data, e.ctypes.data,
-          one.ctypes.data, ref(_int(1)), one.ctypes.data, ref(_int(1)), one.ctypes.data,
-          ref(_int(1)), work.ctypes.data, ref(info))
+    info = ctypes.c_int(0)
+
+    def ints(*xs: int) -> list:  # LAPACK takes every integer by reference
+        return [ctypes.byref(ctypes.c_int(x)) for x in xs]
+
+    gbbrd(b"N", *ints(m, n, 0, kl, ku), ab.ctypes.data, *ints(kl + ku + 1), d.ctypes.data,
+          e.ctypes.data, one.ctypes.data, *ints(1), one.ctypes.data, *ints(1),
+          one.ctypes.data, *ints(1), work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
-    lasq1(ref(_int(k)), d.ctypes.data, e.ctypes.data, work.ctypes.data, ref(info))
+    lasq1(*ints(k), d.ctypes.data, e.ctypes.data, work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
     # dlasq1 leaves the singular values in decreasing order

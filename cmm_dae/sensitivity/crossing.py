@@ -4,6 +4,8 @@ derivative. A part of :class:`~cmm_dae.sensitivity.replay.SensitivityPass`."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from ..equations.kinematics import project_state, singular_ratio
@@ -11,12 +13,23 @@ from ..hybrid.state import SegmentTrace
 from ..singular.gauss import GL_A, GL_B, dense, gl2_step
 from ..singular.instant import hermite, null_vectors
 
-__all__ = ["CrossingPass", "TAU_RATIO"]
+__all__ = ["CrossingPass", "Replay", "TAU_RATIO"]
 
 #: Singular-value ratio at which the singular instant's derivative is taken on either side
 #: of it (round-off in the singular vectors about 1e-16 / TAU_RATIO, the two sides' mean
 #: off by the square of their distance).
 TAU_RATIO = 1e-6
+
+
+@dataclass
+class Replay:
+    """A crossing's Gauss steps replayed with their tangents: the step ends [(t, q, v, s_q,
+    s_v)], each step's stage tangents' difference (the derivative of ``Crossing.dk``) and
+    the end accelerations' tangents computed so far, by end."""
+
+    ends: list
+    dl: list = field(default_factory=list)
+    da: dict = field(default_factory=dict)
 
 
 class CrossingPass:
@@ -33,13 +46,14 @@ class CrossingPass:
         cr = seg.crossing  # never a branch switch: refused before the pass
         p = seg.p
         dP = self.dp_of(p)
-        ends, dl = self._replay(cr, sq, sv, p, dP)
+        rp = self._replay(cr, sq, sv, p, dP)
+        ends = rp.ends
         if seg.crossing_logged:
             self.tau.append(self._singular_tau(p, dP, ends, cr.t_singular))
         # the output grid inside the window (the run recorded it from the crossing's steps)
         t = self.res.t
         while n < t.size - 1 and t[n] < cr.t_after:
-            self.sq[n], self.sv[n] = self.inside(cr, ends, dl, float(t[n]), p, dP)
+            self.sq[n], self.sv[n] = self.inside(cr, rp, float(t[n]), p, dP)
             self.dP[n], self.params[n] = dP, p
             n += 1
         q, v = cr.q, cr.v
@@ -102,45 +116,45 @@ class CrossingPass:
             out.append(tau_at(t, q, v, sq, sv))
         return 0.5 * (out[0] + out[1])
 
-    def inside(self, cr, ends: list, dl: list, t: float, p, dP
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """(s_q, s_v) at a time t inside the crossing ``cr`` (replayed to ``ends``, its
-        steps' stage tangents' differences ``dl``): the derivative of how
-        :meth:`~cmm_dae.singular.Crossing.state_at` reads the step there (the same quintic
-        on the tangents, those of the end accelerations from the KKT system's
-        derivative), projected as that state is."""
+    def inside(self, cr, rp: Replay, t: float, p, dP) -> tuple[np.ndarray, np.ndarray]:
+        """(s_q, s_v) at a time t inside the crossing ``cr`` (replayed as ``rp``): the
+        derivative of how :meth:`~cmm_dae.singular.Crossing.state_at` reads the step there
+        (the same quintic on the tangents, those of the end accelerations from the KKT
+        system's derivative), projected as that state is."""
         k = cr.interval(t)
-        model, nq = self.model, self.model.nq
-        accels, tangents = [], []
-        for i in (k, k + 1):
-            a = cr.end_accel(model, p, i)
-            accels.append(a)
-            if a is None:  # the singular instant: the stage tangents' difference instead
-                tangents.append(None)
-                continue
-            te, qe, ve, sqe, sve = ends[i]
-            qp, vp = project_state(model, qe, ve, te, p)
-            zq, zv = self.project(qp, vp, te, p, dP, sqe, sve)
-            tangents.append(self.kkt_d(qp, vp, te, p, dP, zq, zv)[2][:nq])
-        (t0, q0, v0, sq0, sv0), (t1, q1, v1, sq1, sv1) = ends[k], ends[k + 1]
+        accels = [cr.end_accel(self.model, p, i) for i in (k, k + 1)]
+        tangents = [self._end_tangent(cr, rp, i, p, dP) for i in (k, k + 1)]
+        (t0, q0, v0, sq0, sv0), (t1, q1, v1, sq1, sv1) = rp.ends[k], rp.ends[k + 1]
         q, v = dense(t0, q0, v0, accels[0], t1, q1, v1, accels[1], cr.dk[k], t)
-        sq, sv = dense(t0, sq0, sv0, tangents[0], t1, sq1, sv1, tangents[1], dl[k], t)
-        q, v = project_state(model, q, v, t, p)
+        sq, sv = dense(t0, sq0, sv0, tangents[0], t1, sq1, sv1, tangents[1], rp.dl[k], t)
+        q, v = project_state(self.model, q, v, t, p)
         return self.project(q, v, t, p, dP, sq, sv)
 
-    def _replay(self, cr, sq, sv, p, dP) -> tuple[list, list]:
-        """The crossing's Gauss steps again from its start, with their tangents: the step
-        ends [(t, q, v, s_q, s_v)] and each step's stage tangents' difference."""
+    def _end_tangent(self, cr, rp: Replay, i: int, p, dP) -> np.ndarray | None:
+        """The derivative of the accelerations at the crossing's step end i (None at the
+        singular instant, where the stage tangents' difference stands in), once per end."""
+        if i not in rp.da:
+            got = cr.end_state(self.model, p, i)
+            if got is None:
+                rp.da[i] = None
+            else:
+                qp, vp, _ = got
+                te, _, _, sqe, sve = rp.ends[i]
+                zq, zv = self.project(qp, vp, te, p, dP, sqe, sve)
+                rp.da[i] = self.kkt_d(qp, vp, te, p, dP, zq, zv)[2][:self.model.nq]
+        return rp.da[i]
+
+    def _replay(self, cr, sq, sv, p, dP) -> Replay:
+        """The crossing's Gauss steps again from its start, with their tangents."""
         tt, qq, vv = cr.ends[0]
         guess = self.model.kkt(qq, vv, tt, p)[0]
-        ends = [(tt, qq, vv, sq, sv)]
-        dl: list = []
+        rp = Replay([(tt, qq, vv, sq, sv)])
         for h in cr.steps:
             qq, vv, sq, sv, guess = self._gauss_tangent(tt, qq, vv, sq, sv, h, guess, p, dP,
-                                                        dl)
+                                                        rp.dl)
             tt += h
-            ends.append((tt, qq, vv, sq, sv))
-        return ends, dl
+            rp.ends.append((tt, qq, vv, sq, sv))
+        return rp
 
     def _gauss_tangent(self, t, q, v, sq, sv, h, guess, p, dP, dl: list | None = None):
         """One Gauss step of the crossing (:func:`cmm_dae.singular.gauss.gl2_step`) and its

@@ -179,10 +179,10 @@ class SensitivityPass(CrossingPass):
             except SolverError:
                 raise SolverError(f"the sensitivity integration failed at t = {t_f:.9g} s: "
                                   f"IDA: {r.message}", status=Status.INTEGRATOR) from None
-            ends, dl = self._replay(cr, sq, sv, p, dP)
+            rp = self._replay(cr, sq, sv, p, dP)
             for x in outs:
                 if t_f < x <= cr.t_after:
-                    zq, zv = self.inside(cr, ends, dl, x, p, dP)
+                    zq, zv = self.inside(cr, rp, x, p, dP)
                     T_all.append(x)
                     Sq_all.append(zq)
                     Sv_all.append(zv)
@@ -191,7 +191,7 @@ class SensitivityPass(CrossingPass):
                               f"the crossing's Gauss steps took them on to "
                               f"{cr.t_after:.9g} s")
             t, q, v = cr.t_after, cr.q, cr.v
-            sq, sv = self.project(q, v, t, p, dP, ends[-1][3], ends[-1][4])
+            sq, sv = self.project(q, v, t, p, dP, rp.ends[-1][3], rp.ends[-1][4])
             relaxed = True
             if t >= want[-1] * (1.0 - 1e-15) or not [x for x in want if x > t]:
                 break

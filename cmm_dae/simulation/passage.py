@@ -197,10 +197,10 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 continue
             searched.add(a)
             ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
-            sides.append((a, ends, _on_grid(model, p, ends, s, act, _ratio_at(model, p,
-                                                                               ends))))
-        for a, ends, grid in sorted(sides, key=lambda side: float(np.min(side[2]))):
-            x, r_min = _interval_minimum(model, p, ends, s, grid)
+            at = _ratio_at(model, p, ends)
+            sides.append((a, at, _on_grid(model, p, ends, s, act, at)))
+        for a, at, grid in sorted(sides, key=lambda side: float(np.min(side[2]))):
+            x, r_min = _interval_minimum(at, s, grid)
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant
@@ -293,12 +293,10 @@ def _ratio_at(model: Model, p: np.ndarray, ends: tuple):
     return at
 
 
-def _interval_minimum(model: Model, p: np.ndarray, ends: tuple, s: np.ndarray,
-                      grid: np.ndarray) -> tuple[float, float]:
-    """The smallest singular-value ratio on the samples' interpolant between two samples
-    (``ends``: t, q, v at each) and where it lies (fraction of the interval), from its
+def _interval_minimum(at, s: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
+    """The smallest singular-value ratio ``at(x)`` on the samples' interpolant between two
+    samples (:func:`_ratio_at`) and where it lies (fraction x of the interval), from its
     measure ``grid`` at the fractions ``s`` (:func:`_on_grid`)."""
-    at = _ratio_at(model, p, ends)
     k = int(np.argmin(grid))
     # the ratio dips in a V to zero: the grid may step over its tip, a bounded search
     # between the grid's neighbours finds it. On the ratio's square, which is a parabola

@@ -109,17 +109,24 @@ class Crossing:
         steps = [k for k in range(len(e) - 1) if e[k + 1][0] > e[k][0]]
         return next((k for k in steps if t <= e[k + 1][0]), steps[-1])
 
-    def end_accel(self, model: Model, p: np.ndarray, i: int) -> np.ndarray | None:
-        """The accelerations at the step end ``ends[i]`` projected onto the constraints
-        (kept once computed), None at the singular instant, where they are undetermined
-        (the end :attr:`n_before` steps in, and its repetition after a branch switch)."""
+    def end_state(self, model: Model, p: np.ndarray, i: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The step end ``ends[i]`` projected onto the constraints and its accelerations
+        there (q, v, a; kept once computed); None at the singular instant, where the
+        accelerations are undetermined (the end :attr:`n_before` steps in, and its
+        repetition after a branch switch)."""
         if self.n_before >= 1 and i in (self.n_before, self.n_before + int(self.switched)):
             return None
         if i not in self._accels:
             t, q, v = self.ends[i]
             q1, v1, _ = project(model, p, q, v, t)
-            self._accels[i] = model.kkt(q1, v1, t, p)[0]
+            self._accels[i] = (q1, v1, model.kkt(q1, v1, t, p)[0])
         return self._accels[i]
+
+    def end_accel(self, model: Model, p: np.ndarray, i: int) -> np.ndarray | None:
+        """The accelerations of :meth:`end_state` (None at the singular instant)."""
+        got = self.end_state(model, p, i)
+        return None if got is None else got[2]
 
     def state_at(self, model: Model, p: np.ndarray, t: float
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -193,7 +200,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         tt, qq, vv, taken, ends, switched, dk = _march(st, plan, t_end, rtol, atol)
     except np.linalg.LinAlgError as e:
         raise st.dead(f"the motion cannot be continued through it ({e})") from None
-    return _arrive(st, plan, tt, qq, vv, taken, (ends, dk), switched, t_end, t_min)
+    return _arrive(st, plan, tt, qq, vv, taken, ends, dk, switched, t_end, t_min)
 
 
 def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tuple:
@@ -256,14 +263,13 @@ def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tup
 
 
 def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
-            taken: list[float], steps: tuple[list, list], switched: bool, t_end: float,
+            taken: list[float], ends: list, dk: list, switched: bool, t_end: float,
             t_min: float) -> Crossing:
     """The state after the crossing projected and checked (the motion went on: the
     constraints close, the velocities did not jump, the ratio recovered), the rank drop
-    and the instant located along the Gauss steps: the :class:`Crossing`. ``steps``: the
-    step ends and their stage accelerations' differences."""
+    and the instant located along the Gauss steps: the :class:`Crossing`. ``dk``: the
+    steps' stage accelerations' differences."""
     model, p, t, r0, nsub = st.model, st.p, st.t, st.r0, plan.nsub
-    ends, dk = steps
 
     def failed(why: str) -> SolverError:
         # where the Gauss steps reached the "instant" the constraints had not collapsed
