@@ -118,9 +118,9 @@ _STRUCTURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def active_nonzeros(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The structural nonzeros (rows, columns; row-major) of the active rows ``act`` of a
     large model's Phi_q, from its CasADi pattern, kept per model and row set (None below
-    :data:`SPARSE_ROWS` rows): finding them in the dense matrix took 4.3 of 25 s on A02
+    :data:`banded.BANDED_FROM` rows): finding them in the dense matrix took 4.3 of 25 s on A02
     with 64 loops."""
-    if act.size < SPARSE_ROWS:
+    if act.size < banded.BANDED_FROM:
         return None
     per_model = _STRUCTURES.setdefault(model, {})
     key = act.tobytes()
@@ -222,7 +222,7 @@ def _svd_band(model: Model, act: np.ndarray) -> bandsvd.BandSVD | None:
     return _kept(model, act, "svd band", build)
 
 
-def _gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:
+def gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:
     """The banded structure of the active rows' Gram matrix (:func:`banded.structure` with
     unit masses); None for a wide band, see :func:`_kept`."""
     return _kept(model, act, "band", lambda rows, cols: banded.structure(rows, cols, act.size))
@@ -230,7 +230,7 @@ def _gram_band(model: Model, act: np.ndarray) -> banded.BandedSchur | None:
 
 def _kept(model: Model, act: np.ndarray, kind: str, build):
     """``build(rows, cols)`` of the active rows' structural nonzeros, kept per model, row
-    set and ``kind``; None for fewer than :data:`SPARSE_ROWS` rows."""
+    set and ``kind``; None for fewer than :data:`banded.BANDED_FROM` rows."""
     nz = active_nonzeros(model, act)
     if nz is None:
         return None
@@ -271,11 +271,11 @@ def _gram_lower(band: banded.BandedSchur, vals: np.ndarray) -> np.ndarray:
 def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:
     """log det(J J^T) of the active rows ``act`` at many states at once, from Phi_q's
     nonzeros ``nz`` (states, nonzeros in the CSC order of ``model.phi_q_nz_fn``): the Gram
-    matrices in their banded structure (:func:`_gram_band`), each factored by a banded
+    matrices in their banded structure (:func:`gram_band`), each factored by a banded
     Cholesky (LAPACK dpbtrf); -inf where one is not positive definite (singular to
     round-off). None where the structure is not banded. A chain of 32 loops: one sparse
     LU per state took most of the stepped-over screen."""
-    band = _gram_band(model, act) if act.size <= model.nq else None
+    band = gram_band(model, act) if act.size <= model.nq else None
     if band is None:
         return None
     ab = _gram_lower(band, nz[:, _STRUCTURES[model][("csc", act.tobytes())]])
