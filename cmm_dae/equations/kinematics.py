@@ -293,6 +293,16 @@ def rank_drop(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float) -
     return rank.collapsed(model.constraints(q, t, p).Phi_q[model.active_rows(p)], r0)
 
 
+def collapsed_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: float
+                   ) -> tuple[int, list[str]]:
+    """:func:`rank_drop` and the rows of :func:`dependent_rows` (``tol = 1``) from one SVD
+    at q (each took its own: 4 and 8.7 ms with 32 loops)."""
+    act = model.active_rows(p)
+    U, s, _ = np.linalg.svd(model.constraints(q, t, p).Phi_q[act], full_matrices=False)
+    drop = max(int(np.sum(s < rank.COLLAPSE * r0 * s[0])), 1) if s.size else 1
+    return drop, _row_labels(model, act, U, drop)
+
+
 def row_names(labels: list[str], limit: int = 12) -> str:
     """The constraint rows' labels for a message: all of them up to ``limit``, else the
     first ones and how many more (A02 with 40 loops has 102 at its singular positions)."""
@@ -311,21 +321,27 @@ def dependent_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     them, and which rows it named changed with the instant's last digits)."""
     act = model.active_rows(p)
     J = model.constraints(q, t, p).Phi_q[act]
-    U, s, _ = np.linalg.svd(J)
+    U, s, _ = np.linalg.svd(J, full_matrices=False)
     if J.shape[0] > J.shape[1]:
         s = np.concatenate([s, np.zeros(J.shape[0] - J.shape[1])])
     ratio = float(s[-1] / s[0]) if s.size and s[0] > 0 else 0.0
     if ratio > tol:
         return [], ratio
-    k = min(J.shape)
+    return _row_labels(model, act, U, drop), ratio
+
+
+def _row_labels(model: Model, act: np.ndarray, U: np.ndarray, drop: int) -> list[str]:
+    """The labels of the active rows ``act`` that the last ``drop`` of the left singular
+    vectors ``U`` (rows x min(rows, coordinates)) weigh."""
+    k = U.shape[1]
     w = np.linalg.norm(U[:, max(k - drop, 0):k], axis=1)
-    labels = []
+    labels: list[str] = []
     for i in np.flatnonzero(w > 0.05 * w.max()):
         r = model.rows[act[i]]
         lab = f"{r.kind} {r.name}" if r.kind != "joint" else f"joint {r.name}"
         if lab not in labels:
             labels.append(lab)
-    return labels, ratio
+    return labels
 
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Event, EventKind
-from ..equations.kinematics import dependent_rows, rank_drop, row_names
+from ..equations.kinematics import collapsed_rows, row_names
 from ..hybrid import policy as ev
 from ..integrators.contract import Integrator, Recorder, RunOptions, SegmentEnd
 from ..singular.step import FINE_NODE_RATIO, NODE_RATIO, Crossing, step_over
@@ -150,8 +150,7 @@ def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
     logged = []
     for ps, k, q_s, v_s, r0 in stepped_over(model, p, t, q, v, rec, n0, end):
         # against the ratio r0 at the sample the passage's search started from
-        drop = rank_drop(model, q_s, ps.t, p, r0)
-        labels, _ = dependent_rows(model, q_s, ps.t, p, tol=1.0, drop=drop)
+        drop, labels = collapsed_rows(model, q_s, ps.t, p, r0)
         speed = float(np.linalg.norm(v_s))
         events.append(_event(ps.t, labels, drop, ps.ratio, "IDA integrated through it "
                              "within its error test (found afterwards in its samples, the "
