@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cmm_dae.simulation.passage import START_RATIO, _start_before
+from cmm_dae.simulation.passage_start import START_RATIO, predicted_start, start_before
 
 
 def _walk(a: int, ratios: np.ndarray) -> int:
@@ -31,12 +31,46 @@ def test_galloping_start_is_the_walks(seed):
         return float(ratios[i])
 
     a = n - 1
-    assert _start_before(a, r) == _walk(a, ratios)
+    assert start_before(a, r) == _walk(a, ratios)
     assert len(asked) <= 2 * max(n, 2).bit_length() + 1  # not one per sample
 
 
 def test_no_sample_reaches_the_start_ratio():
     ratios = np.full(129, 0.5 * START_RATIO)
     asked: list[int] = []
-    assert _start_before(128, lambda i: asked.append(i) or float(ratios[i])) == 0
+    assert start_before(128, lambda i: asked.append(i) or float(ratios[i])) == 0
     assert len(asked) == 9  # 128, then 127, 126, 124, 120, 112, 96, 64, 0
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_any_guess_gives_the_walks_start(seed):
+    """A guess (right, wrong on either side, out of range) never changes the answer."""
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(2, 300))
+    ratios = np.cumsum(rng.uniform(0.0, 3.0 * START_RATIO / n, n))[::-1]
+    a = n - 1
+    for guess in (None, -1, 0, int(rng.integers(0, n)), a - 1, a, _walk(a, ratios)):
+        assert start_before(a, lambda i: float(ratios[i]), guess) == _walk(a, ratios)
+
+
+def test_a_right_guess_costs_three_ratios():
+    ratios = np.linspace(10.0 * START_RATIO, 0.0, 200)
+    answer = _walk(199, ratios)
+    asked: list[int] = []
+    assert start_before(199, lambda i: asked.append(i) or float(ratios[i]), answer) == answer
+    assert asked == [199, answer, answer + 1]
+
+
+@pytest.mark.parametrize("k", [1, 8, 32])
+def test_predicted_start_from_the_log_determinant(k):
+    """Next to a passage at sample 150 the smallest k singular values fall linearly to
+    zero together and the others stay (log det(J J^T) = 2 k log sigma_min + const): the
+    prediction from two known ratios next to the dip is the walk's answer."""
+    i = np.arange(200)
+    ratio = 2e-4 * np.abs(i - 150.3)
+    logdet = 2.0 * k * np.log(ratio) + 7.0
+    a = 150
+    known = {a: float(ratio[a]), a - 1: float(ratio[a - 1]), 0: float(ratio[0])}
+    assert predicted_start(a, logdet, known) == _walk(a, ratio)
+    assert predicted_start(a, None, known) is None
+    assert predicted_start(a, logdet, {a: float(ratio[a])}) is None

@@ -7,6 +7,7 @@ accumulated from Phi_q's nonzeros through one sparse product (:func:`structure`,
 
 from __future__ import annotations
 
+import functools
 import weakref
 from dataclasses import dataclass
 from typing import Any
@@ -90,8 +91,9 @@ def banded_solve(st: BandedSchur, vals: np.ndarray, mass: np.ndarray, Qf: np.nda
     ab = ab.reshape(n, -1)
     ab[:, st.diag] -= free[:, st.perm]
     ab = ab.reshape(n, 3 * st.bw + 1, m)
-    rhs = np.zeros((n, m))
-    np.add.at(rhs.T, st.rows, (vals * (Qf[:, st.cols] / mass[st.cols])).T)
+    # Phi_q M^-1 Q, nonzero by nonzero, summed into rows by a sparse product (np.add.at
+    # took a sixth of the solve: 1.1 of 6 ms for 64 samples with 32 loops)
+    rhs = np.asarray((_scatter(st.rows, m).T @ (vals * (Qf[:, st.cols] / mass[st.cols])).T).T)
     rhs = (rhs - gamma)[:, st.perm]
     lam = np.empty((n, m))
     bw = st.bw
@@ -132,6 +134,18 @@ def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray,
         lam = banded_solve(st, vals, model.mass, Qf, gamma, free)
     except np.linalg.LinAlgError:
         return None
-    force = np.zeros((n, model.nq))  # Phi_q^T lambda, nonzero by nonzero
-    np.add.at(force.T, st.cols, (vals * lam[:, st.rows]).T)
+    # Phi_q^T lambda, nonzero by nonzero
+    force = np.asarray((_scatter(st.cols, model.nq).T @ (vals * lam[:, st.rows]).T).T)
     return (Qf - force) / model.mass, lam
+
+
+@functools.lru_cache(maxsize=16)
+def _scatter_cached(index: bytes, size: int) -> sp.csr_matrix:
+    where = np.frombuffer(index, dtype=np.int64)
+    return sp.csr_matrix((np.ones(where.size), (np.arange(where.size), where)),
+                         shape=(where.size, size))
+
+
+def _scatter(index: np.ndarray, size: int) -> sp.csr_matrix:
+    """The (entries, size) matrix that sums entry e into position ``index[e]``."""
+    return _scatter_cached(np.asarray(index, dtype=np.int64).tobytes(), size)

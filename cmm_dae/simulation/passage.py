@@ -24,6 +24,7 @@ from ..equations.kinematics import gram_band, gram_function, log_gram, singular_
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import hermite
+from .passage_start import predicted_start, start_before
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
 WATCH_RATIO = 0.3
@@ -31,9 +32,6 @@ WATCH_RATIO = 0.3
 #: this (it falls linearly to zero at the instant; elsewhere a well-posed mechanism stays
 #: far above it).
 PASSAGE_RATIO = 1e-3
-#: The crossing starts from the last sample before the passage whose ratio is at least
-#: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
-START_RATIO = 0.01
 #: Points per sample interval at which the interpolant's ratio is evaluated.
 POINTS = 64
 
@@ -51,7 +49,7 @@ class Passage:
     """A singular position between two samples of a segment (indices into the samples
     searched, the segment's start first)."""
 
-    start: int  #: the last sample before it whose ratio is at least :data:`START_RATIO`
+    start: int  #: the last sample before it whose ratio is at least :data:`.START_RATIO`
     interval: int  #: it lies between samples ``interval`` and ``interval + 1``
     t: float  #: the singular instant on the samples' interpolant, s
     ratio: float  #: the interpolant's singular-value ratio there
@@ -183,7 +181,8 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
     found: list[Passage] = []
     searched: set[int] = set()
-    for i in sorted(_dips(_candidates(model, p, t, q, act, r), n, r)):
+    candidates, logdet = _candidates(model, p, t, q, act, r)
+    for i in sorted(_dips(candidates, n, r)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
@@ -213,40 +212,22 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         if best is not None and best[0] < PASSAGE_RATIO:
             r_min, x, a = best
             t_s = float(t[a] + x * (t[a + 1] - t[a]))
-            found.append(Passage(_start_before(a, r), a, t_s, r_min))
+            guess = predicted_start(a, logdet, ratios)
+            found.append(Passage(start_before(a, r, guess), a, t_s, r_min))
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
 
 
-def _start_before(a: int, r) -> int:
-    """The last sample at or before ``a`` whose ratio ``r(i)`` is at least :data:`START_RATIO`
-    (0 where none is): 1, 2, 4, ... samples back, then the last gap halved, the ratio rising
-    back from a passage (sample by sample, A02 with 128 loops took 146 ratios of 47 ms)."""
-    if r(a) >= START_RATIO or a == 0:
-        return a
-    below, step = a, 1  # r(below) < START_RATIO
-    while (j := max(below - step, 0)) > 0 and r(j) < START_RATIO:
-        below, step = j, 2 * step
-    if r(j) < START_RATIO:
-        return 0
-    while below - j > 1:  # r(j) >= START_RATIO > r(below)
-        mid = (j + below) // 2
-        if r(mid) >= START_RATIO:
-            j = mid
-        else:
-            below = mid
-    return j
-
-
 def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-                act: np.ndarray, r) -> list[int]:
+                act: np.ndarray, r) -> tuple[list[int], np.ndarray | None]:
     """The samples where the ratio may dip to zero: the segment's ends, and local minima
     of log det(J J^T) well below one neighbour (every sample where the rows are none or
-    more than the coordinates). ``r(i)``: the exact ratio at sample i."""
+    more than the coordinates), and that log det at every sample (None there). ``r(i)``:
+    the exact ratio at sample i."""
     n = t.size
     if not 0 < act.size <= model.nq:
-        return list(range(n))
+        return list(range(n)), None
     # Next to a passage the smallest singular value falls linearly to zero, so the sample
     # nearer the instant has at most a third of the farther neighbour's (a drop of 2 ln 3
     # in the log determinant, the other singular values unchanged); where the
@@ -265,7 +246,7 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
         reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
         if r(end) <= r(a) and abs(zero - t[end]) <= reach:
             candidates.append(end)
-    return candidates
+    return candidates, d
 
 
 def _dips(candidates: list[int], n: int, r) -> set[int]:
