@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cython_lapack
+from scipy.linalg import cython_lapack, lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 __all__ = ["BandSVD", "ratio", "structure"]
@@ -110,8 +110,34 @@ def ratio(st: BandSVD, values: np.ndarray) -> float | None:
           one.ctypes.data, *ints(1), work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
+    if k >= BISECT_FROM:
+        return _extreme_ratio(d, e[:k - 1])
     lasq1(*ints(k), d.ctypes.data, e.ctypes.data, work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
     # dlasq1 leaves the singular values in decreasing order
     return float(d[-1] / d[0]) if d[0] > 0.0 else 0.0
+
+
+#: Bidiagonals from this size on give their extreme singular values by bisection
+#: (:func:`_extreme_ratio`), not all of them by dqds (``dlasq1``, O(k^2)): with 32 loops
+#: (k = 194) 0.44 against 0.84 ms, with 128 (k = 770) 1.8 against 11 ms; with 8 (k = 50)
+#: dqds is faster (82 against 110 us).
+BISECT_FROM = 100
+
+
+def _extreme_ratio(d: np.ndarray, e: np.ndarray) -> float | None:
+    """Smallest over largest singular value of the upper bidiagonal with diagonal ``d`` and
+    superdiagonal ``e``: the largest and the k-th largest eigenvalue of its Golub-Kahan
+    form (zero diagonal, off-diagonal d1, e1, d2, ..., eigenvalues +-sigma), by LAPACK's
+    bisection (``dstebz``) to full relative accuracy, as LAPACK's ``dbdsvdx`` takes them."""
+    k = d.size
+    off = np.empty(2 * k - 1)
+    off[0::2], off[1::2] = d, e
+    zero, tol = np.zeros(2 * k), 2.0 * np.finfo(float).tiny
+    big = lapack.dstebz(zero, off, 2, 0.0, 0.0, 2 * k, 2 * k, tol, b"E")
+    small = lapack.dstebz(zero, off, 2, 0.0, 0.0, k + 1, k + 1, tol, b"E")
+    if big[-1] != 0 or small[-1] != 0:
+        return None
+    top, low = float(big[1][0]), max(float(small[1][0]), 0.0)
+    return low / top if top > 0.0 else 0.0

@@ -53,6 +53,7 @@ class Passage:
     interval: int  #: it lies between samples ``interval`` and ``interval + 1``
     t: float  #: the singular instant on the samples' interpolant, s
     ratio: float  #: the interpolant's singular-value ratio there
+    start_ratio: float  #: the ratio at sample ``start``
 
 
 def _mapped_chunks(model: Model, name: str, p: np.ndarray, t: np.ndarray, q: np.ndarray):
@@ -213,7 +214,8 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             r_min, x, a = best
             t_s = float(t[a] + x * (t[a + 1] - t[a]))
             guess = predicted_start(a, logdet, ratios)
-            found.append(Passage(start_before(a, r, guess), a, t_s, r_min))
+            j = start_before(a, r, guess)
+            found.append(Passage(j, a, t_s, r_min, r(j)))
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
@@ -361,8 +363,7 @@ def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
             continue
         a = ps.interval
         qs_, vs_ = hermite(ts[a], qs[a], vs[a], ts[a + 1], qs[a + 1], vs[a + 1], ps.t)
-        j = ps.start
-        out.append((ps, after, qs_, vs_, singular_ratio(model, qs[j], float(ts[j]), p)))
+        out.append((ps, after, qs_, vs_, ps.start_ratio))
     return out
 
 
