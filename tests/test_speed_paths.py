@@ -205,10 +205,11 @@ def test_clean_fallback_without_compiler(tmp_path):
     assert out[2] == "True True"
 
 
-def test_sparse_screen_matches_the_dense_one():
+def test_sparse_screen_matches_the_dense_one(monkeypatch):
     """The stepped-over screen of a large mechanism takes log det(J J^T) from Phi_q's
-    nonzeros (sparse LU per sample): the same numbers as the dense path (measured 7e-14 on
-    a chain of 32 loops), and the start's assembly is computed once per model."""
+    nonzeros (banded Cholesky of all samples' Gram matrices in one block-diagonal band):
+    the same numbers as the dense path (measured 7e-14 on a chain of 32 loops), and the
+    start's assembly is computed once per model."""
     from cmm_dae.simulation import passage
 
     mech = four_bar_chain(32)
@@ -219,9 +220,10 @@ def test_sparse_screen_matches_the_dense_one():
     act = model.active_rows(p)
     keep = np.r_[True, np.diff(res.t) > 0]
     sparse = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
-    model.kkt_sparse = False
-    dense = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
-    model.kkt_sparse = True
+    with monkeypatch.context() as m:  # the dense path: no band, not sparse
+        m.setattr(model, "kkt_sparse", False)
+        m.setattr(passage, "gram_band", lambda *a: None)
+        dense = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
     assert np.max(np.abs(sparse - dense)) <= 1e-10
     def starts() -> int:  # the start's values the model keeps (core.memo.once)
         return sum(1 for key in model._once if key[0] == "start")
@@ -256,3 +258,50 @@ def test_a_mechanism_run_again_reuses_its_model():
     for _ in range(cache.MODELS_KEPT + 1):  # the least recently run goes first
         cd.run_dae(four_bar_chain(1), 0.01)
     assert len(cache._models) == cache.MODELS_KEPT
+
+
+def test_block_diagonal_band_factors_are_each_states_own():
+    """log det(J J^T) of many states from one banded Cholesky of their block-diagonal
+    matrix, and the multipliers of many samples from one banded LU: bit for bit what one
+    LAPACK call per state gives, also where states in the middle are singular (-inf
+    there, the states after them factored on). A02 with 8 loops, its run's samples."""
+    from scipy.linalg.lapack import dgbsv, dpbtrf
+
+    from cmm_dae.description import iftomm
+    from cmm_dae.equations import kinematics
+
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    p, n = model.params(), res.t.size
+    act = model.active_rows(p)
+    fz = model.mapped("phi_q_nz_fn", n)
+    nz = fz(res.data["q"].T, res.t, np.tile(p[:, None], (1, n)))[0].reshape(-1, n).T
+    nz[[7, 20, n - 1]] = 0.0  # three singular states, the last one among them
+    band = kinematics.gram_band(model, act)
+    ab = kinematics._gram_lower(band, nz[:, kinematics._STRUCTURES[model][
+        ("csc", act.tobytes())]])
+    one_by_one = []
+    for i in range(n):
+        c, info = dpbtrf(ab[i], lower=1)
+        one_by_one.append(2.0 * float(np.sum(np.log(c[0]))) if info == 0 else -np.inf)
+    got = kinematics.log_gram(model, act, nz)
+    assert np.array_equal(got, np.array(one_by_one))
+    assert np.isneginf(got[[7, 20, n - 1]]).all() and np.isfinite(got[8])
+
+    st = banded.for_model(model)
+    assert st is not None  # 50 rows: banded from 32 on
+    t, q, v = res.t, res.data["q"], res.data["v"]
+    P = np.tile(p, (n, 1))
+    a, lam = banded.batch_from_nonzeros(model, t, q, v, P)
+    vals, Qf, gamma = (np.asarray(x).reshape(-1, n).T for x in model.mapped(
+        "kkt_nz_fn", n)(q.T, v.T, t, P.T))
+    prod = vals[:, st.pa] * vals[:, st.pb] / model.mass[st.pk]
+    abs_ = np.asarray((st.to_band.T @ prod.T).T).reshape(n, 3 * st.bw + 1, st.m)
+    rhs = np.zeros((n, st.m))
+    np.add.at(rhs.T, st.rows, (vals * (Qf[:, st.cols] / model.mass[st.cols])).T)
+    rhs = (rhs - gamma)[:, st.perm]
+    for i in (0, n // 2, n - 1):
+        _, _, x, info = dgbsv(st.bw, st.bw, abs_[i], rhs[i])
+        assert info == 0
+        assert np.max(np.abs(lam[i, st.perm] - x)) <= 1e-12 * np.max(np.abs(x))

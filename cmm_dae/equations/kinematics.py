@@ -279,10 +279,22 @@ def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None
     if band is None:
         return None
     ab = _gram_lower(band, nz[:, _STRUCTURES[model][("csc", act.tobytes())]])
-    out = np.empty(nz.shape[0])
-    for i in range(nz.shape[0]):
-        c, info = dpbtrf(ab[i], lower=1)
-        out[i] = 2.0 * float(np.sum(np.log(c[0]))) if info == 0 else -np.inf
+    n, m = ab.shape[0], band.m
+    # the states' matrices as the blocks of one block-diagonal band matrix, factored by
+    # one call (one call per state: 20 us each, most of it the call, on A02 with 8 loops);
+    # a block that is not positive definite stops the factorization: -inf for it, and on
+    # from the next
+    big = banded.stacked(ab)
+    out = np.empty(n)
+    start = 0
+    while start < n:
+        c, info = dpbtrf(big[:, start * m:], lower=1)
+        stop = n if info == 0 else start + (info - 1) // m  # blocks factored
+        out[start:stop] = 2.0 * np.log(c[0, :(stop - start) * m].reshape(-1, m)).sum(axis=1)
+        if info == 0:
+            break
+        out[stop] = -np.inf
+        start = stop + 1
     return out
 
 
