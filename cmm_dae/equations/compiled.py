@@ -94,6 +94,6 @@ def use_compiled(model: Model, build: bool = True) -> bool:
     for attr, f in singles.items():
         setattr(model, attr, Buffered(ca.external(f.name(), str(lib))))
     # the maps built on the virtual machine's functions go (they are built anew on use)
-    model._maps = {k: v for k, v in model._maps.items() if k[0] not in MAPPED}
+    model.forget_maps(MAPPED)
     model.outputs_compiled = True
     return True

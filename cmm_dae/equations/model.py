@@ -27,11 +27,7 @@ from ..core.errors import ModelError, Problem
 from ..description.mechanism import Mechanism
 from ..description.params import param_value, symbolic
 from . import build, kkt, reaction
-from .build import (  # noqa: F401 (model.Row and the records, as before)
-    Constraints,
-    JointCoords,
-    Row,
-)
+from .build import Constraints, JointCoords, Row  # noqa: F401 (model.Row, as before)
 from .codegen import Buffered, compile_functions
 from .unknowns import Unknowns, ground_pins
 
@@ -326,6 +322,10 @@ class Model:
         if key not in self._maps:
             self._maps[key] = Buffered(getattr(self, name).map(n))
         return self._maps[key]
+
+    def forget_maps(self, names) -> None:
+        """Drop the maps of the functions ``names`` (built anew on their next use)."""
+        self._maps = {k: v for k, v in self._maps.items() if k[0] not in names}
 
     def fill(self, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``p`` with the values of the callable load laws at (t, q, v) (``p`` itself when

@@ -38,6 +38,7 @@ from .state import (
     Transition,
     Trigger,
     TriggerKind,
+    idle_slide,
     impulses,
     joint_acceleration,
     joint_rate,
@@ -76,8 +77,8 @@ def event_list(model: Model, locked: Locked) -> list[Trigger]:
             kind = TK.SLIP if locked[name] == Side.STICK else TK.PUSH
             out.append(Trigger(name, Side(locked[name]), kind))
             continue
-        if name in model.slides and model.slides[name] not in locked:
-            continue  # a contact's slide slips only while the contact touches
+        if idle_slide(model, name, locked):
+            continue
         lim = model.joints[name].stops
         if lim is not None and lim.lower is not None:
             out.append(Trigger(name, Side.LOWER, TK.GAP))

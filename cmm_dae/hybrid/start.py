@@ -18,7 +18,7 @@ from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
 from .policy import on_stop, resting_rate, stick_or_slip
-from .state import HybridState
+from .state import HybridState, idle_slide
 from .zones import initial_zones
 
 #: Position residual (m or rad) below which a loop counts as closed.
@@ -225,9 +225,8 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
             events.append(Event(t=t0, kind=EventKind.LOCK, joint=name, side=side, before=before,
                                 after=hs.current()))
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
-        if name in hs.locked or (name in model.slides and model.slides[name] not in
-                                 hs.locked):
-            continue  # (a contact's slide only while the contact touches)
+        if name in hs.locked or idle_slide(model, name, hs.locked):
+            continue
         k = model.jidx[name]
         if cd0[k] != 0.0:
             hs.slip = {**hs.slip, name: 1 if cd0[k] > 0 else -1}

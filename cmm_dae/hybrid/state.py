@@ -267,6 +267,12 @@ def slide_of(model: Model, joint: str) -> str | None:
     return name if name in model.slides else None
 
 
+def idle_slide(model: Model, name: str, locked: Locked) -> bool:
+    """Whether ``name`` is the slide of a contact that does not touch under ``locked`` (a
+    slide slips or sticks only while its contact touches)."""
+    return name in model.slides and model.slides[name] not in locked
+
+
 def without(model: Model, locked: Locked, joint: str) -> dict[str, str]:
     """Lock set ``locked`` without ``joint`` and, for a contact, its slide (a slide holds
     only while its contact touches)."""
