@@ -243,10 +243,12 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
         if b < 0 or b >= n:  # two samples: the line through both
             a, b = end, a
+        if r(end) > r(a):  # rising towards the end (the third ratio not needed)
+            continue
         slope = (r(b) - r(a)) / (t[b] - t[a])
         zero = t[a] - r(a) / slope if slope != 0.0 else math.inf
         reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
-        if r(end) <= r(a) and abs(zero - t[end]) <= reach:
+        if abs(zero - t[end]) <= reach:
             candidates.append(end)
     return candidates, d
 
