@@ -74,3 +74,33 @@ def test_predicted_start_from_the_log_determinant(k):
     assert predicted_start(a, logdet, known) == _walk(a, ratio)
     assert predicted_start(a, None, known) is None
     assert predicted_start(a, logdet, {a: float(ratio[a])}) is None
+
+
+def test_parabolas_find_the_minimum_of_the_squared_ratio():
+    """The instant of a passage on the samples' interpolant: successive parabolas through
+    the three best points of the ratio's square. On a parabola, one step and a check; on
+    a V squared with a cubic term and a floor (a near miss), within the tolerance of the
+    minimum found by a fine grid; None where no convex parabola fits."""
+    from cmm_dae.singular.instant import parabola_minimum
+
+    calls: list[float] = []
+
+    def square(x: float) -> float:
+        calls.append(x)
+        return 4.0 * (x - 0.3141592653589793) ** 2
+
+    pts = {x: square(x) for x in (0.25, 0.3, 0.4)}
+    calls.clear()
+    x = parabola_minimum(square, pts, 0.25, 0.4)
+    assert abs(x - 0.3141592653589793) <= 1e-12 and len(calls) <= 2
+
+    def bent(x: float) -> float:
+        d = x - 0.61803398875
+        return (3.0 * d + 40.0 * d ** 3) ** 2 + 1e-14
+
+    grid = np.linspace(0.6, 0.64, 400_001)
+    ref = grid[np.argmin([bent(g) for g in grid])]
+    x = parabola_minimum(bent, {x: bent(x) for x in (0.6, 0.61, 0.64)}, 0.6, 0.64)
+    assert x is not None and abs(x - ref) <= 2e-7  # the grid's own spacing: 1e-7
+    concave = {0.1: -0.01, 0.2: -0.04, 0.3: -0.09}
+    assert parabola_minimum(lambda x: -x * x, concave, 0.0, 1.0) is None

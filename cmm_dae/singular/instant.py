@@ -4,12 +4,14 @@ cubic Hermite interpolant those steps are read through."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.optimize import brentq
 
 from ..equations.model import Model
 
-__all__ = ["hermite", "null_vectors", "singular_instant"]
+__all__ = ["hermite", "null_vectors", "parabola_minimum", "singular_instant"]
 
 
 def hermite(t0: float, q0: np.ndarray, v0: np.ndarray, t1: float, q1: np.ndarray,
@@ -69,3 +71,25 @@ def singular_instant(model: Model, p: np.ndarray, ends: list, t_guess: float) ->
                 rtol=4.0 * np.finfo(float).eps)
         w, n = null_vectors(model, p, hermite(*a, *b, t_s)[0], t_s)
     return t_s
+
+
+def parabola_minimum(f, pts: dict[float, float], lo: float, hi: float, xatol: float = 1e-9,
+               most: int = 8) -> float | None:
+    """Successive parabolic interpolation of ``f`` in [lo, hi] from the points ``pts``
+    (x -> f(x), at least three; the evaluations are added to it): the minimum's x once a
+    step is shorter than ``xatol``, None where a parabola is not convex or leaves the
+    interval, or after ``most`` steps. For a singular-value ratio's square near a passage
+    (:mod:`cmm_dae.simulation.passage`), which is a parabola about its minimum."""
+    for _ in range(most):
+        (x0, f0), (x1, f1), (x2, f2) = sorted(sorted(pts.items(), key=lambda e: e[1])[:3])
+        den = (x1 - x0) * (f1 - f2) - (x1 - x2) * (f1 - f0)
+        if not den < 0.0:  # not a convex parabola through the three
+            return None
+        xv = x1 - 0.5 * ((x1 - x0) ** 2 * (f1 - f2) - (x1 - x2) ** 2 * (f1 - f0)) / den
+        if not lo <= xv <= hi:
+            return None
+        best = min(pts, key=pts.__getitem__)
+        if xv in pts or abs(xv - best) <= xatol:
+            return best if pts[best] <= pts.get(xv, math.inf) else xv
+        pts[xv] = f(xv)
+    return None
