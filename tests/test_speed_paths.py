@@ -262,9 +262,10 @@ def test_a_mechanism_run_again_reuses_its_model():
 
 def test_block_diagonal_band_factors_are_each_states_own():
     """log det(J J^T) of many states from one banded Cholesky of their block-diagonal
-    matrix, and the multipliers of many samples from one banded LU: bit for bit what one
-    LAPACK call per state gives, also where states in the middle are singular (-inf
-    there, the states after them factored on). A02 with 8 loops, its run's samples."""
+    matrix: bit for bit what one LAPACK call per state gives, also where states in the
+    middle are singular (-inf there, the states after them factored on); the multipliers
+    of many samples from one banded LU: those of one call per sample to 1e-12 of their
+    largest. A02 with 8 loops, its run's samples."""
     from scipy.linalg.lapack import dgbsv, dpbtrf
 
     from cmm_dae.description import iftomm

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import null_space as _null_space
 
-__all__ = ["COLLAPSE", "RANK_TOL", "collapsed", "dependent", "null_space", "rank", "ratio"]
+__all__ = ["COLLAPSE", "RANK_TOL", "collapsed", "count_collapsed", "dependent", "null_space",
+           "rank", "ratio"]
 
 #: Relative size (to the largest) below which a singular value counts as zero: the
 #: numerical rank, dependent rows, the null space. Rows this close to dependent cannot be
@@ -62,5 +63,9 @@ def collapsed(J: np.ndarray, r0: float) -> int:
     """How many singular values of ``J`` have collapsed (below :data:`COLLAPSE` times
     ``r0``, the ratio where the approach to a singular instant was seen, times the
     largest); at least 1."""
-    s = singular_values(J)
+    return count_collapsed(singular_values(J), r0)
+
+
+def count_collapsed(s: np.ndarray, r0: float) -> int:
+    """:func:`collapsed` from the singular values ``s`` (largest first)."""
     return max(int(np.sum(s < COLLAPSE * r0 * s[0])), 1) if s.size else 1

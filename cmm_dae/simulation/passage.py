@@ -291,10 +291,12 @@ def _interval_minimum(at, s: np.ndarray, grid: np.ndarray) -> tuple[float, float
     # grid point's; Brent where the parabolas do not close in
     lo_s = s[k - 1] if k > 0 else 0.0
     hi_s = s[k + 1] if k < s.size - 1 else 1.0
-    pts = {float(x): at(float(x)) ** 2 for x in (lo_s, s[k], hi_s)}
-    found = parabola_minimum(lambda x: at(x) ** 2, pts, lo_s, hi_s)
-    if found is None:
-        opt = minimize_scalar(lambda x: at(x) ** 2, bounds=(lo_s, hi_s), method="bounded",
+    def square(x: float) -> float:
+        return at(float(x)) ** 2
+
+    pts = {float(x): square(x) for x in (lo_s, s[k], hi_s)}
+    if parabola_minimum(square, pts, lo_s, hi_s) is None:
+        opt = minimize_scalar(square, bounds=(lo_s, hi_s), method="bounded",
                               options={"xatol": 1e-9})
         pts[float(opt.x)] = float(opt.fun)
     x = min(pts, key=pts.__getitem__)

@@ -4,8 +4,6 @@ cubic Hermite interpolant those steps are read through."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.optimize import brentq
 
@@ -74,7 +72,7 @@ def singular_instant(model: Model, p: np.ndarray, ends: list, t_guess: float) ->
 
 
 def parabola_minimum(f, pts: dict[float, float], lo: float, hi: float, xatol: float = 1e-9,
-               most: int = 8) -> float | None:
+                     most: int = 8) -> float | None:
     """Successive parabolic interpolation of ``f`` in [lo, hi] from the points ``pts``
     (x -> f(x), at least three; the evaluations are added to it): the minimum's x once a
     step is shorter than ``xatol``, None where a parabola is not convex or leaves the
@@ -90,6 +88,6 @@ def parabola_minimum(f, pts: dict[float, float], lo: float, hi: float, xatol: fl
             return None
         best = min(pts, key=pts.__getitem__)
         if xv in pts or abs(xv - best) <= xatol:
-            return best if pts[best] <= pts.get(xv, math.inf) else xv
+            return best
         pts[xv] = f(xv)
     return None
