@@ -46,12 +46,15 @@ _BLAS = None
 
 
 def _one_blas_thread():
-    """A context with one BLAS thread: the package's systems are small, and on a busy
-    2-core machine OpenBLAS's default threads turned a 0.47 s run into 5.3 s."""
+    """A context with one BLAS and one OpenMP thread: the package's systems are small, and
+    on a busy 2-core machine OpenBLAS's default threads turned a 0.47 s run into 5.3 s.
+    SuperLU_MT (IDA's sparse solver) is asked for one thread, yet its OpenMP runtime
+    started the default team, whose idle threads spin: IDA's segments of A02 with 8 loops
+    took 71 ms on average against 10 ms with one thread (best of 20: 8.1 against 9.0)."""
     global _BLAS
     if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once
         _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
+    return _BLAS.limit(limits=1)
 
 
 def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
