@@ -262,11 +262,13 @@ def test_a_mechanism_run_again_reuses_its_model():
 
 def test_block_diagonal_band_factors_are_each_states_own():
     """log det(J J^T) of many states from one banded Cholesky of their block-diagonal
-    matrix: bit for bit what one LAPACK call per state gives, also where states in the
-    middle are singular (-inf there, the states after them factored on); the multipliers
-    of many samples from one banded LU: those of one call per sample to 1e-12 of their
-    largest. A02 with 8 loops, its run's samples."""
-    from scipy.linalg.lapack import dgbsv, dpbtrf
+    matrix: bit for bit what one LAPACK call per state on its block gives, also where
+    states in the middle are singular (-inf there, the states after them factored on),
+    and a dense log det of J J^T to 1e-12; the multipliers of many
+    samples from one banded Cholesky, and from the LU that takes over where rows are free:
+    those of a dense solve of each sample's Schur complement to 1e-12 of their largest.
+    A02 with 8 loops, its run's samples."""
+    from scipy.linalg.lapack import dpbtrf
 
     from cmm_dae.description import iftomm
     from cmm_dae.equations import kinematics
@@ -277,32 +279,47 @@ def test_block_diagonal_band_factors_are_each_states_own():
     p, n = model.params(), res.t.size
     act = model.active_rows(p)
     fz = model.mapped("phi_q_nz_fn", n)
-    nz = fz(res.data["q"].T, res.t, np.tile(p[:, None], (1, n)))[0].reshape(-1, n).T
-    nz[[7, 20, n - 1]] = 0.0  # three singular states, the last one among them
+    nz = fz(res.data["q"].T, res.t, np.tile(p[:, None], (1, n)))[0].reshape(-1, n)
+    nz[:, [7, 20, n - 1]] = 0.0  # three singular states, the last one among them
     band = kinematics.gram_band(model, act)
-    ab = kinematics._gram_lower(band, nz[:, kinematics._STRUCTURES[model][
+    rows, cols = (np.asarray(x, int) for x in model.phi_q_pattern.get_triplet())
+    blocks = banded.lower_blocks(band, nz[kinematics._STRUCTURES[model][
         ("csc", act.tobytes())]])
-    one_by_one = []
+    one_by_one, dense = [], []
     for i in range(n):
-        c, info = dpbtrf(ab[i], lower=1)
+        c, info = dpbtrf(blocks[:, i * band.m:(i + 1) * band.m], lower=1)
         one_by_one.append(2.0 * float(np.sum(np.log(c[0]))) if info == 0 else -np.inf)
+        J = np.zeros((model.m, model.nq))
+        J[rows, cols] = nz[:, i]  # (the nonzeros in CSC order, as get_triplet's)
+        sign, logdet = np.linalg.slogdet(J[act] @ J[act].T)
+        dense.append(logdet if sign > 0 else -np.inf)
     got = kinematics.log_gram(model, act, nz)
     assert np.array_equal(got, np.array(one_by_one))
     assert np.isneginf(got[[7, 20, n - 1]]).all() and np.isfinite(got[8])
+    ok, dense = np.isfinite(got), np.array(dense)
+    assert np.array_equal(ok, np.isfinite(dense))
+    # to round-off where the Gram matrix is well conditioned (log det above 0); next to
+    # the two singular positions (log det down to -93) round-off grows as its condition
+    # number (measured 1.6e-9)
+    far = ok & (got > 0.0)
+    assert far.sum() > n // 2
+    assert np.max(np.abs(got[far] - dense[far])) <= 1e-12 * np.max(np.abs(got[far]))
+    assert np.max(np.abs(got[ok] - dense[ok])) <= 1e-8
 
     st = banded.for_model(model)
     assert st is not None  # 50 rows: banded from 32 on
     t, q, v = res.t, res.data["q"], res.data["v"]
     P = np.tile(p, (n, 1))
-    a, lam = banded.batch_from_nonzeros(model, t, q, v, P)
-    vals, Qf, gamma = (np.asarray(x).reshape(-1, n).T for x in model.mapped(
+    vals, Qf, gamma = (np.asarray(x).reshape(-1, n) for x in model.mapped(
         "kkt_nz_fn", n)(q.T, v.T, t, P.T))
-    prod = vals[:, st.pa] * vals[:, st.pb] / model.mass[st.pk]
-    abs_ = np.asarray((st.to_band.T @ prod.T).T).reshape(n, 3 * st.bw + 1, st.m)
-    rhs = np.zeros((n, st.m))
-    np.add.at(rhs.T, st.rows, (vals * (Qf[:, st.cols] / model.mass[st.cols])).T)
-    rhs = (rhs - gamma)[:, st.perm]
-    for i in (0, n // 2, n - 1):
-        _, _, x, info = dgbsv(st.bw, st.bw, abs_[i], rhs[i])
-        assert info == 0
-        assert np.max(np.abs(lam[i, st.perm] - x)) <= 1e-12 * np.max(np.abs(x))
+    for free_row in (None, 3):  # every row active (Cholesky); one row free (LU)
+        free = np.zeros((model.m, n))
+        if free_row is not None:
+            free[free_row] = 1.0
+        lam = banded.banded_solve(st, vals, model.mass, Qf, gamma, free)
+        for i in (0, n // 2, n - 1):
+            J = np.zeros((model.m, model.nq))
+            J[rows, cols] = vals[:, i]
+            S = J @ (J / model.mass).T - np.diag(free[:, i])
+            x = np.linalg.solve(S, J @ (Qf[:, i] / model.mass) - gamma[:, i])
+            assert np.max(np.abs(lam[i] - x)) <= 1e-12 * np.max(np.abs(x))

@@ -261,32 +261,23 @@ def gram_function(model: Model) -> ca.Function:
     return fn
 
 
-def _gram_lower(band: banded.BandedSchur, vals: np.ndarray) -> np.ndarray:
-    """The Gram matrices of states whose Jacobian nonzeros (at ``band.rows``,
-    ``band.cols``) are ``vals`` (states, nonzeros), in LAPACK's lower band storage
-    (states, bw + 1, m): the lower half of the banded structure's dgbsv storage."""
-    prods = vals[:, band.pa] * vals[:, band.pb]
-    ab = np.asarray((band.to_band.T @ prods.T).T).reshape(vals.shape[0], -1, band.m)
-    return ab[:, 2 * band.bw:]
-
-
 def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:
     """log det(J J^T) of the active rows ``act`` at many states at once, from Phi_q's
-    nonzeros ``nz`` (states, nonzeros in the CSC order of ``model.phi_q_nz_fn``): the Gram
-    matrices in their banded structure (:func:`gram_band`), each factored by a banded
-    Cholesky (LAPACK dpbtrf); -inf where one is not positive definite (singular to
-    round-off). None where the structure is not banded. A chain of 32 loops: one sparse
-    LU per state took most of the stepped-over screen."""
+    nonzeros ``nz`` (nonzeros in the CSC order of ``model.phi_q_nz_fn``, states: the
+    layout of its mapped evaluation): the Gram matrices in their banded structure
+    (:func:`gram_band`), each factored by a banded Cholesky (LAPACK dpbtrf); -inf where
+    one is not positive definite (singular to round-off). None where the structure is not
+    banded. A chain of 32 loops: one sparse LU per state took most of the stepped-over
+    screen."""
     band = gram_band(model, act) if act.size <= model.nq else None
     if band is None:
         return None
-    ab = _gram_lower(band, nz[:, _STRUCTURES[model][("csc", act.tobytes())]])
-    n, m = ab.shape[0], band.m
+    n, m = nz.shape[1], band.m
     # the states' matrices as the blocks of one block-diagonal band matrix, factored by
     # one call (one call per state: 20 us each, most of it the call, on A02 with 8 loops);
     # a block that is not positive definite stops the factorization: -inf for it, and on
     # from the next
-    big = banded.stacked(ab)
+    big = banded.lower_blocks(band, nz[_STRUCTURES[model][("csc", act.tobytes())]])
     out = np.empty(n)
     start = 0
     while start < n:

@@ -106,11 +106,12 @@ def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     shape = (pat.size1(), pat.size2())
     out = np.empty(t.size)
     for k, m, outs in _mapped_chunks(model, "phi_q_nz_fn", p, t, q):
-        nz = np.asarray(outs[0]).reshape(row.size, -1).T  # (sample, nonzero)
-        banded = log_gram(model, act, nz[:m])
+        nz = np.asarray(outs[0]).reshape(row.size, -1)[:, :m]  # (nonzero, sample)
+        banded = log_gram(model, act, nz)
         if banded is not None:  # a narrow band: a banded Cholesky per sample
             out[k:k + m] = banded
             continue
+        nz = nz.T
         for j in range(m):
             J = csc_matrix((nz[j], row, colind), shape=shape)[act]
             try:
