@@ -323,3 +323,37 @@ def test_block_diagonal_band_factors_are_each_states_own():
             S = J @ (J / model.mass).T - np.diag(free[:, i])
             x = np.linalg.solve(S, J @ (Qf[:, i] / model.mass) - gamma[:, i])
             assert np.max(np.abs(lam[i] - x)) <= 1e-12 * np.max(np.abs(x))
+
+
+def test_collapsed_rows_from_the_gram_eigenpairs_are_the_svds():
+    """At the singular instants of A02 with 8 loops (50 rows, banded) the rank drop and
+    the dependent rows come from the Gram matrix's eigenpairs below the threshold: the
+    same count (8) and labels as the SVD gives, and their eigenvectors span the SVD's
+    last 8 left singular vectors to 1e-8."""
+    from cmm_dae.description import iftomm
+    from cmm_dae.equations import kinematics, rank
+    from cmm_dae.singular.instant import hermite
+
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    p = model.params()
+    act = model.active_rows(p)
+    assert kinematics.gram_band(model, act) is not None
+    assert len(res.events) == 2
+    t, q, v = res.t, res.data["q"], res.data["v"]
+    for e in res.events:
+        a = int(np.searchsorted(t, e.t)) - 1
+        qs = hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], e.t)[0]
+        r0 = 0.05
+        drop, labels = kinematics.collapsed_rows(model, qs, e.t, p, r0)
+        J = model.constraints(qs, e.t, p).Phi_q[act]
+        U, s, _ = np.linalg.svd(J, full_matrices=False)
+        assert drop == rank.count_collapsed(s, r0) == 8
+        assert labels == kinematics._row_labels(model, act, U, drop)
+        got = rank.collapsed_gram(J, r0, float(s[0] ** 2))
+        assert got is not None and got[0] == 8
+        Uk = U[:, -8:]
+        assert np.max(np.abs(Uk @ Uk.T - got[1] @ got[1].T)) <= 1e-8
+    # a threshold below GRAM_FROM: the SVD decides
+    assert rank.collapsed_gram(J, 0.1 * rank.GRAM_FROM, float(s[0] ** 2)) is None
