@@ -260,7 +260,7 @@ def test_post_processing_in_c_gives_the_same_series():
     a = cd.run_dae(mech, 10.0, model=model, compiled=False)
     assert not getattr(model, "outputs_compiled", False)
     assert compiled.use_compiled(model)
-    assert all(getattr(model, attr).is_a("External") for attr in compiled.MAPPED)
+    assert all(getattr(model, attr).is_a("External") for attr in compiled.DENSE)
     b = cd.run_dae(mech, 10.0, model=model, compiled=False)
     _same(a, b, {})
     for key in ("jforce", "jtorque", "effort", "lam", "a", "drift_pos", "drift_vel"):
@@ -272,21 +272,32 @@ def test_post_processing_in_c_gives_the_same_series():
 
 
 def test_a_large_model_compiles_its_segment_alone():
-    """Post-processing's library is compiled only up to 40 constraint rows and
+    """Post-processing's dense library is compiled only up to 40 constraint rows and
     OUTPUTS_BUDGET instructions (gcc took 13.5 s for A02 with 8 loops' 28,600 and 359 s
-    with 32 loops): A02 with 8 loops (50 rows) runs its segment in C and its
-    post-processing on CasADi's virtual machine, and the build estimate counts the
-    segment alone; the double-folded mechanism (12 rows) compiles both, within budget."""
+    with 32 loops); a banded mechanism compiles the functions of Phi_q's nonzeros alone:
+    A02 with 8 loops (50 rows) runs its segment, post-processing and screen in C, the
+    same series within 1e-12 as on CasADi's virtual machine, and the build estimate
+    counts both libraries; the double-folded mechanism (12 rows) compiles the dense
+    set, within budget."""
     from cmm_dae.description.iftomm import a02_four_bar
     from cmm_dae.equations import compiled
 
     model = cd.Model(a02_four_bar(8))
-    res = cd.run_dae(model.mech, 0.05, rtol=1e-3, compiled=True, model=model)
-    assert res.meta["compiled"] and not getattr(model, "outputs_compiled", False)
-    assert compiled.instructions(model) == float("inf")
+    a = cd.run_dae(model.mech, 1.0, rtol=1e-3, compiled=False, model=model)
+    outs = compiled.instructions(model)
+    assert 0 < outs <= compiled.OUTPUTS_BUDGET
     u = model.ida
     assert csegment.build_estimate(model) == pytest.approx(
-        0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions()))
+        0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
+        + 0.2 + 2.5e-4 * outs)
+    assert compiled.use_compiled(model) and model.outputs_compiled
+    assert all(getattr(model, attr).is_a("External") for attr in compiled.BANDED)
+    b = cd.run_dae(model.mech, 1.0, rtol=1e-3, compiled=False, model=model)
+    for key in ("jforce", "lam", "a", "drift_pos"):  # (no driver: no effort)
+        x, y = a.data[key], b.data[key]
+        assert x.size and np.max(np.abs(x - y)) <= 1e-12 * max(np.max(np.abs(x)), 1e-300), key
+    assert len(a.events) == 1  # the first singular position, stepped over
+    assert [(e.t, e.note) for e in a.events] == [(e.t, e.note) for e in b.events]
     small = cd.Model(cd.load(cd.example("double_folded")))
     assert 0 < compiled.instructions(small) <= compiled.OUTPUTS_BUDGET
     assert compiled.use_compiled(small) and small.outputs_compiled

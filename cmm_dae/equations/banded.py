@@ -20,7 +20,7 @@ from scipy.linalg.lapack import dgbsv, dpbsv
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 __all__ = ["BANDED_FROM", "BAND_SHARE", "BandedSchur", "banded_solve", "batch_from_nonzeros",
-           "for_model", "full_band", "lower_blocks", "structure"]
+           "for_model", "full_band", "kkt_nz_function", "lower_blocks", "structure"]
 
 
 #: The banded path is taken from this many constraint rows on, when the band is narrow
@@ -159,11 +159,7 @@ def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     """(a, lambda) of every sample of a banded mechanism (:func:`for_model`) from Phi_q's
     nonzeros alone; None if a sample's Schur complement is singular."""
     n, st = t.size, for_model(model)
-    if getattr(model, "kkt_nz_fn", None) is None:
-        args = model.kkt_fn.sx_in()
-        _, Qf, gamma = model.kkt_fn(*args)
-        nz = model.phi_q_nz_fn(args[0], args[2], args[3])
-        model.kkt_nz_fn = ca.Function("kkt_nz", args, [nz, Qf, gamma])
+    kkt_nz_function(model)
     vals, Qf, gamma = (np.asarray(x).reshape(-1, n) for x in model.mapped(
         "kkt_nz_fn", n)(q.T, v.T, t, P.T))
     free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n)
@@ -174,6 +170,18 @@ def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     # Phi_q^T lambda, nonzero by nonzero
     force = _scatter(st.cols, model.nq).T @ (vals * lam.T[st.rows])
     return (Qf - force).T / model.mass, lam
+
+
+def kkt_nz_function(model: Any) -> ca.Function:
+    """``kkt_nz(q, v, t, p)`` -> (Phi_q's nonzeros, Q, gamma): the parts of the KKT system
+    a banded mechanism's post-processing evaluates (built once, as ``model.kkt_nz_fn``,
+    for :meth:`~cmm_dae.equations.model.Model.mapped`)."""
+    if getattr(model, "kkt_nz_fn", None) is None:
+        args = model.kkt_fn.sx_in()
+        _, Qf, gamma = model.kkt_fn(*args)
+        nz = model.phi_q_nz_fn(args[0], args[2], args[3])
+        model.kkt_nz_fn = ca.Function("kkt_nz", args, [nz, Qf, gamma])
+    return model.kkt_nz_fn
 
 
 @functools.lru_cache(maxsize=16)

@@ -23,16 +23,25 @@ import casadi as ca
 import numpy as np
 
 from ..core.memo import once
-from . import kinematics, kkt, outputs
+from . import banded, kinematics, kkt, outputs
 from .codegen import Buffered, NotBuiltError, build_library, function_key
 from .model import Model
 
-__all__ = ["MAPPED", "OUTPUTS_BUDGET", "SINGLE", "instructions", "use_compiled"]
+__all__ = ["BANDED", "DENSE", "MAPPED", "OUTPUTS_BUDGET", "SINGLE", "instructions",
+           "use_compiled"]
 
 #: The model's attributes so replaced, and the names of their CasADi functions.
 MAPPED = {"outputs_fn": "outputs", "series_fn": "series", "gram_fn": "gram",
-          "schur_fn": "schur", "acc_fn": "acc", "post_kkt_fn": "post_kkt"}
-#: The model's single-state evaluators (:class:`~.codegen.Buffered`) so replaced.
+          "schur_fn": "schur", "acc_fn": "acc", "post_kkt_fn": "post_kkt",
+          "kkt_nz_fn": "kkt_nz", "phi_q_nz_fn": "phi_q_nz", "free_fn": "free_rows"}
+#: Those compiled for a mechanism that is not banded (where it has them).
+DENSE = ("outputs_fn", "series_fn", "gram_fn", "schur_fn", "acc_fn", "post_kkt_fn")
+#: Those compiled for a banded one (:func:`~.banded.for_model`), whose post-processing and
+#: screen work from Phi_q's nonzeros (A02 with 32 loops: 11,400 instructions; its dense
+#: Schur complement, Gram matrix and single-state evaluators would be 250,000).
+BANDED = ("outputs_fn", "series_fn", "kkt_nz_fn", "phi_q_nz_fn", "free_fn")
+#: The model's single-state evaluators (:class:`~.codegen.Buffered`) so replaced (not on
+#: a banded mechanism).
 SINGLE = ("_phi", "_coord", "_cvel", "_post", "_kin", "_rates_jac", "_kkt_parts", "_free",
           "event_parts")
 
@@ -41,11 +50,22 @@ def _functions(model: Model) -> dict[str, ca.Function]:
     """The functions of :data:`MAPPED` that ``model`` has, built where not yet."""
     outputs.function(model)
     outputs.series_function(model)
+    if banded.for_model(model) is not None:
+        banded.kkt_nz_function(model)
+        return {attr: getattr(model, attr) for attr in BANDED}
     kinematics.gram_function(model)
     if model.m and np.all(model.mass > 0.0):  # (the Schur complement needs every mass)
         kkt.schur_functions(model)
-    return {attr: getattr(model, attr) for attr in MAPPED
+    return {attr: getattr(model, attr) for attr in DENSE
             if getattr(model, attr, None) is not None}
+
+
+def _singles(model: Model) -> dict[str, ca.Function]:
+    """The single-state evaluators of :data:`SINGLE` compiled for ``model`` (none for a
+    banded one)."""
+    if banded.for_model(model) is not None:
+        return {}
+    return {attr: getattr(model, attr).fn for attr in SINGLE}
 
 
 #: Most CasADi instructions compiled into the library of a model's post-processing and
@@ -58,14 +78,14 @@ OUTPUTS_BUDGET = 12_000
 def instructions(model: Model) -> float:
     """CasADi instructions of the functions :func:`use_compiled` compiles (counted once
     per model, before they are replaced by compiled ones, which cannot count them); inf
-    for more than :data:`~.kkt.LDL_ROWS` constraint rows, without building them (their
-    Schur complement and Gram matrix alone are m^2 outputs: A02 with 8 loops, 50 rows, is
-    over the budget)."""
-    if model.m > kkt.LDL_ROWS:
+    for more than :data:`~.kkt.LDL_ROWS` constraint rows unless the mechanism is banded
+    (:data:`BANDED`), without building them (their Schur complement and Gram matrix alone
+    are m^2 outputs)."""
+    if model.m > kkt.LDL_ROWS and banded.for_model(model) is None:
         return math.inf
 
     def count() -> int:
-        every = [*_functions(model).values(), *(getattr(model, a).fn for a in SINGLE)]
+        every = [*_functions(model).values(), *_singles(model).values()]
         return sum(f.n_instructions() for f in every)
 
     return once(model, ("outputs instructions",), count)
@@ -80,8 +100,7 @@ def use_compiled(model: Model, build: bool = True) -> bool:
         return True
     if instructions(model) > OUTPUTS_BUDGET:
         return False
-    funcs = _functions(model)
-    singles = {attr: getattr(model, attr).fn for attr in SINGLE}
+    funcs, singles = _functions(model), _singles(model)
     every = [*funcs.values(), *singles.values()]
     try:
         lib = build_library(function_key(every), None, every, build=build)

@@ -198,7 +198,8 @@ class Model:
         self.qr_fn = ca.Function("qr", [q, v, lam, t, p], [dn(Qr)])
         #: which of those powers the mechanism has at all (not identically zero)
         self.powered = tuple(k for k in range(powers.numel()) if not powers[k].is_zero())
-        self.free_fn = ca.Function("free", [p], [dn(free)])
+        # (not "free": compiled, the name is a C symbol, which would shadow libc's)
+        self.free_fn = ca.Function("free_rows", [p], [dn(free)])
         # single-point evaluations for the step-by-step paths (private: callers use the
         # named methods below)
         self._phi = Buffered(self.phi_fn)

@@ -16,14 +16,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
 from ..equations.kinematics import gram_band, gram_function, log_gram, singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
-from ..singular.instant import hermite, parabola_minimum
+from ..singular.instant import hermite, interval_minimum
 from .passage_start import predicted_start, start_before
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
@@ -221,7 +220,7 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             at = _ratio_at(model, p, ends)
             sides.append((a, at, *_refined_grid(model, p, ends, act, at)))
         for a, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[3]))):
-            x, r_min = _interval_minimum(at, s, grid)
+            x, r_min = interval_minimum(at, s, grid)
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant
@@ -297,30 +296,6 @@ def _ratio_at(model: Model, p: np.ndarray, ends: tuple):
         tx = float(ends[0] + x * (ends[3] - ends[0]))
         return singular_ratio(model, hermite(*ends, tx)[0], tx, p)
     return at
-
-
-def _interval_minimum(at, s: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
-    """The smallest singular-value ratio ``at(x)`` on the samples' interpolant between two
-    samples (:func:`_ratio_at`) and where it lies (fraction x of the interval), from its
-    measure ``grid`` at the fractions ``s`` (:func:`_on_grid`)."""
-    k = int(np.argmin(grid))
-    # the ratio dips in a V to zero: the grid may step over its tip, a search between the
-    # grid's neighbours finds it. On the ratio's square, a parabola there (and smooth where
-    # it stays clear of zero), successive parabolas through the three best points converge
-    # in 4-6 ratios (A02 with 8 and 32 loops), Brent's bounded search took 9-10 with the
-    # grid point's; Brent where the parabolas do not close in
-    lo_s = s[k - 1] if k > 0 else 0.0
-    hi_s = s[k + 1] if k < s.size - 1 else 1.0
-    def square(x: float) -> float:
-        return at(float(x)) ** 2
-
-    pts = {float(x): square(x) for x in (lo_s, s[k], hi_s)}
-    if parabola_minimum(square, pts, lo_s, hi_s) is None:
-        opt = minimize_scalar(square, bounds=(lo_s, hi_s), method="bounded",
-                              options={"xatol": 1e-9})
-        pts[float(opt.x)] = float(opt.fun)
-    x = min(pts, key=pts.__getitem__)
-    return x, math.sqrt(pts[x])
 
 
 def _samples(t: float, q: np.ndarray, v: np.ndarray, rec: Recorder, n0: int,
