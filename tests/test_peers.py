@@ -41,6 +41,10 @@ def test_compare_picks_the_cheapest_tolerance_reaching_mujocos_error():
     assert math.isfinite(row["cmm_dae_first_s"]) and row["cmm_dae_first_s"] > 0
     assert math.isclose(row["first_ratio"], row["cmm_dae_first_s"] / row["mujoco_s"])
     assert "time ratio" in peers.peers_table([row])
+    # which path the timed runs took, as the run's own meta says
+    res = cd.run_dae(iftomm.a02_four_bar(1), 0.5, rtol=row["rtol"])
+    assert row["path"] == ("C" if res.meta["compiled"] else "Python")
+    assert f"  {row['path']:>6}" in peers.peers_table([row])
 
 
 def test_cli_peers(capsys):

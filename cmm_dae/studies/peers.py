@@ -151,8 +151,9 @@ def chain_row(n: int, name: str, run_peer, *, t_end: float, h: float, repeat: in
     """A02 with ``n`` loops run by a peer, ``run_peer(n, t_end, h) -> (t, tip)``, and by
     cmm_dae at the cheapest of ``rtols`` reaching its error: ``loops``, ``h``,
     ``<name>_error`` (m), ``rtol`` (None where none did), ``cmm_dae_error`` (m), the best
-    wall times ``<name>_s`` and ``cmm_dae_s`` (s), alternating, and ``ratio``, cmm_dae's
-    over the peer's."""
+    wall times ``<name>_s`` and ``cmm_dae_s`` (s), alternating, ``ratio``, cmm_dae's
+    over the peer's, and ``path``: "C" where its runs used the compiled segment (a cached
+    build, which ``compiled="auto"`` finds), else "Python"."""
     mech = iftomm.a02_four_bar(n)
     err_peer = error_a02(*run_peer(n, t_end, h), n)
 
@@ -165,8 +166,10 @@ def chain_row(n: int, name: str, run_peer, *, t_end: float, h: float, repeat: in
            "cmm_dae_error": err}
     # side by side: best-of-repeat timings
     row[f"{name}_s"] = best_time(lambda: run_peer(n, t_end, h), repeat)[0]
-    row["cmm_dae_s"] = (best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)[0]
-                        if chosen is not None else math.nan)
+    row["cmm_dae_s"], row["path"] = math.nan, "-"
+    if chosen is not None:
+        row["cmm_dae_s"], res = best_time(lambda: run_dae(mech, t_end, rtol=chosen), repeat)
+        row["path"] = "C" if res.meta.get("compiled") else "Python"
     row["ratio"] = row["cmm_dae_s"] / row[f"{name}_s"]
     return row
 
@@ -201,8 +204,11 @@ def peers_table(rows: list[dict]) -> str:
     """The comparison as text, one line per problem size."""
     lines = ["A02 four-bar chain, 2 s, equal accuracy (largest crank-tip error against the "
              "reference)",
-             f"{'loops':>5}  {COLUMNS}  {'first run':>9}"]
-    lines += [f"{r['loops']:>5}  {columns(r)}  {r['first_ratio']:>9.2f}" for r in rows]
+             f"{'loops':>5}  {COLUMNS}  {'first run':>9}  {'path':>6}"]
+    lines += [f"{r['loops']:>5}  {columns(r)}  {r['first_ratio']:>9.2f}  {r['path']:>6}"
+              for r in rows]
     lines.append(f"{RATIO_NOTE}; first run: cmm_dae's run that builds the model, over "
-                 "MuJoCo's")
+                 "MuJoCo's; path: where cmm_dae's runs went, C (the compiled segment, "
+                 "built once per mechanism by a run with compiled=True and then found by "
+                 "the default) or Python")
     return "\n".join(lines)
