@@ -104,3 +104,40 @@ def test_parabolas_find_the_minimum_of_the_squared_ratio():
     assert x is not None and abs(x - ref) <= 2e-7  # the grid's own spacing: 1e-7
     concave = {0.1: -0.01, 0.2: -0.04, 0.3: -0.09}
     assert parabola_minimum(lambda x: -x * x, concave, 0.0, 1.0) is None
+
+
+def test_logged_passages_skip_the_walk_back():
+    """A passage only logged (branch "continue") does not look for its crossing's start:
+    the same instants and minimum ratios as with the search, its start -1 and the
+    ratio its rank drop is counted against START_RATIO (A02 with 8 loops, whose ratio
+    is far above it away from the passages), with fewer exact ratios."""
+    import cmm_dae as cd
+    from cmm_dae.description import iftomm
+    from cmm_dae.simulation import passage
+
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    p, t, q, v = model.params(), res.t, res.data["q"], res.data["v"]
+    counted = []
+    ratio = passage.singular_ratio
+
+    def counting(*args):
+        counted.append(1)
+        return ratio(*args)
+
+    runs = {}
+    for start in (True, False):
+        counted.clear()
+        passage.singular_ratio = counting
+        try:
+            runs[start] = (passage.passages(model, p, t, q, v, start=start), len(counted))
+        finally:
+            passage.singular_ratio = ratio
+    (full, n_full), (logged, n_logged) = runs[True], runs[False]
+    assert len(full) == len(logged) == 2
+    assert [(x.t, x.ratio, x.interval) for x in full] == [
+        (x.t, x.ratio, x.interval) for x in logged]
+    assert all(x.start >= 0 and x.start_ratio >= START_RATIO for x in full)
+    assert all(x.start == -1 and x.start_ratio == START_RATIO for x in logged)
+    assert n_logged < n_full

@@ -149,7 +149,7 @@ def log_stepped_over(hs: ev.HybridState, t: float, q: np.ndarray, v: np.ndarray,
     model, p, cfg = hs.model, hs.p, hs.current()
     logged = []
     for ps, k, q_s, v_s, r0 in stepped_over(model, p, t, q, v, rec, n0, end):
-        # against the ratio r0 at the sample the passage's search started from
+        # against r0, the ratio a crossing of it would start from
         drop, labels = collapsed_rows(model, q_s, ps.t, p, r0)
         speed = float(np.linalg.norm(v_s))
         events.append(_event(ps.t, labels, drop, ps.ratio, "IDA integrated through it "
