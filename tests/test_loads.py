@@ -54,19 +54,21 @@ def test_andrews_squeezer_at_a_loose_tolerance_runs_through():
 
 
 def test_a_stiff_failure_without_a_singular_position_is_no_dead_point(tmp_path):
-    """The squeezer with its spring 1e4 times stiffer (4.53e7 N/m): at rtol 1e-3 IDA gives
-    up at 0.00083 s. The constraints' singular-value ratio is 3e-3 throughout (no singular
-    position anywhere); such a failure was once crossed as a singular position and
-    reported as a "dead point". It is IDA's own failure, said so, with the run kept up to
-    it."""
+    """The squeezer with its spring 1e4 times stiffer (4.53e7 N/m): at rtol 1e-2, 5e-3 and
+    1e-3 IDA gives up before 0.001 s. The constraints' singular-value ratio is 3e-3
+    throughout (no singular position anywhere); such a failure was once crossed as a
+    singular position and reported as a "dead point". It is IDA's own failure, said so,
+    with the run kept up to it."""
     text = (MODELS / "andrews_squeezer.toml").read_text()
     assert "stiffness = 4530.0 " in text
     stiff = tmp_path / "stiff_squeezer.toml"
     stiff.write_text(text.replace("stiffness = 4530.0 ", "stiffness = 4.53e7 "))
-    res = cd.run_dae(cd.load(stiff), 0.03, rtol=1e-3, output_dt=None, throw=False)
-    assert res.status is cd.Status.INTEGRATOR
-    assert "no dead point found" in res.message
-    assert 1e-4 < res.t[-1] < 0.03 and not res.events
+    for rtol in (1e-2, 5e-3, 1e-3):  # (at 1e-2 the ratio at the failure, 3.6e-3, fell
+        # locally but was above the segment's start's, 2.8e-3: once read as a dead point)
+        res = cd.run_dae(cd.load(stiff), 0.03, rtol=rtol, output_dt=None, throw=False)
+        assert res.status is cd.Status.INTEGRATOR, rtol
+        assert "no dead point found" in res.message
+        assert 1e-4 < res.t[-1] < 0.03 and not res.events
 
 
 # --------------------------------------------------------------- loaded pendulum

@@ -248,9 +248,10 @@ def failure(model: Model, hs, p: np.ndarray, ratio0: float, crawled: bool,
     # (also a failure very near one, ahead or just past it: the policy tells which). A
     # ratio that is only low is no dead point where it was as low at the segment's start:
     # Andrews' squeezer runs at 3e-3 throughout, and IDA failing on its stiff spring at
-    # rtol 1e-3 was reported as a dead point
+    # rtol 1e-3 was reported as a dead point; nor where it falls only locally from a value
+    # above the start's (the squeezer with its spring 1e4 times stiffer, at rtol 1e-2)
     if ratio < 0.2 * ratio0 or (ratio < 0.01 and ratio < 0.5 * ratio0) or (
-            ratio < FALLING_RATIO and falls()):
+            ratio < FALLING_RATIO and ratio < ratio0 and falls()):
         what = (f"dead point at t = {tt:.6g} s: the constraints of {row_names(labels)} "
                 f"become dependent (singular-value ratio {ratio:.1e}), so the mechanism "
                 "cannot follow its drivers through this position")
