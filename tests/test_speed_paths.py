@@ -283,8 +283,7 @@ def test_block_diagonal_band_factors_are_each_states_own():
     nz[:, [7, 20, n - 1]] = 0.0  # three singular states, the last one among them
     band = kinematics.gram_band(model, act)
     rows, cols = (np.asarray(x, int) for x in model.phi_q_pattern.get_triplet())
-    blocks = banded.lower_blocks(band, nz[kinematics._STRUCTURES[model][
-        ("csc", act.tobytes())]])
+    blocks = banded.lower_blocks(band, nz[kinematics._csc_index(model, act)])
     one_by_one, dense = [], []
     for i in range(n):
         c, info = dpbtrf(blocks[:, i * band.m:(i + 1) * band.m], lower=1)

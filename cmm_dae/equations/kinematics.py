@@ -139,6 +139,19 @@ def active_nonzeros(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return per_model[key]
 
 
+def _csc_index(model: Model, act: np.ndarray) -> np.ndarray:
+    """Where the active rows' nonzeros, in :func:`active_nonzeros`' order (which must have
+    found them), are among Phi_q's nonzeros in ``model.phi_q_nz_fn``'s CSC order."""
+    return _STRUCTURES[model][("csc", act.tobytes())]
+
+
+def _active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
+                      p: np.ndarray) -> np.ndarray:
+    """The active rows' Phi_q nonzeros at one state, evaluated alone (:func:`_csc_index`)."""
+    return np.asarray(model.mapped("phi_q_nz_fn", 1)(q, t, p)[0]).ravel()[
+        _csc_index(model, act)]
+
+
 def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarray,
             rcond: float | None) -> tuple[np.ndarray, Constraints | None]:
     """Minimum-norm Newton iterations onto the rows ``act``: q, and the constraints
@@ -208,8 +221,7 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     if st is not None:
         # Phi_q's nonzeros alone (the dense constraints' evaluation took 5 % of a run of
         # A02 with 32 loops)
-        nz = model.mapped("phi_q_nz_fn", 1)(q, t, p)[0]
-        r = bandsvd.ratio(st, nz.ravel()[_STRUCTURES[model][("csc", act.tobytes())]])
+        r = bandsvd.ratio(st, _active_values_at(model, act, q, t, p))
         if r is not None:
             return r
     return rank.ratio(model.constraints(q, t, p).Phi_q[act])
@@ -277,7 +289,7 @@ def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None
     # one call (one call per state: 20 us each, most of it the call, on A02 with 8 loops);
     # a block that is not positive definite stops the factorization: -inf for it, and on
     # from the next
-    big = banded.lower_blocks(band, nz[_STRUCTURES[model][("csc", act.tobytes())]])
+    big = banded.lower_blocks(band, nz[_csc_index(model, act)])
     out = np.empty(n)
     start = 0
     while start < n:
@@ -307,8 +319,7 @@ def collapsed_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: flo
     J = model.constraints(q, t, p).Phi_q[act]
     band = gram_band(model, act) if act.size <= model.nq else None
     if band is not None:  # a long chain: the Gram matrix's largest and smallest eigenpairs
-        nz = np.asarray(model.mapped("phi_q_nz_fn", 1)(q, t, p)[0]).reshape(-1, 1)
-        low = banded.lower_blocks(band, nz[_STRUCTURES[model][("csc", act.tobytes())]])
+        low = banded.lower_blocks(band, _active_values_at(model, act, q, t, p)[:, None])
         top = eigvals_banded(low, lower=True, select="i", select_range=(band.m - 1,) * 2)
         got = rank.collapsed_gram(J, r0, float(top[0]))
         if got is not None:
