@@ -145,7 +145,7 @@ def _csc_index(model: Model, act: np.ndarray) -> np.ndarray:
     return _STRUCTURES[model][("csc", act.tobytes())]
 
 
-def _active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
+def active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
                       p: np.ndarray) -> np.ndarray:
     """The active rows' Phi_q nonzeros at one state, evaluated alone (:func:`_csc_index`)."""
     return np.asarray(model.mapped("phi_q_nz_fn", 1)(q, t, p)[0]).ravel()[
@@ -221,7 +221,7 @@ def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> floa
     if st is not None:
         # Phi_q's nonzeros alone (the dense constraints' evaluation took 5 % of a run of
         # A02 with 32 loops)
-        r = bandsvd.ratio(st, _active_values_at(model, act, q, t, p))
+        r = bandsvd.ratio(st, active_values_at(model, act, q, t, p))
         if r is not None:
             return r
     return rank.ratio(model.constraints(q, t, p).Phi_q[act])
@@ -319,7 +319,7 @@ def collapsed_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: flo
     J = model.constraints(q, t, p).Phi_q[act]
     band = gram_band(model, act) if act.size <= model.nq else None
     if band is not None:  # a long chain: the Gram matrix's largest and smallest eigenpairs
-        low = banded.lower_blocks(band, _active_values_at(model, act, q, t, p)[:, None])
+        low = banded.lower_blocks(band, active_values_at(model, act, q, t, p)[:, None])
         top = eigvals_banded(low, lower=True, select="i", select_range=(band.m - 1,) * 2)
         got = rank.collapsed_gram(J, r0, float(top[0]))
         if got is not None:

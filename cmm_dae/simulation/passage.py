@@ -22,7 +22,8 @@ from scipy.sparse.linalg import splu
 from ..equations.kinematics import gram_band, gram_function, log_gram, singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
-from ..singular.instant import hermite, interval_minimum
+from ..singular.instant import hermite
+from ..singular.tip import interval_instant
 from .passage_start import START_RATIO, predicted_start, start_before
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
@@ -227,9 +228,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             searched.add(a)
             ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
             at = _ratio_at(model, p, ends)
-            sides.append((a, at, *_refined_grid(model, p, ends, act, at)))
-        for a, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[3]))):
-            x, r_min = interval_minimum(at, s, grid)
+            sides.append((a, ends, at, *_refined_grid(model, p, ends, act, at)))
+        for a, ends, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[4]))):
+            x, r_min = interval_instant(model, p, ends, act, at, s, grid)
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant

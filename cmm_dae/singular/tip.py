@@ -1,0 +1,145 @@
+"""The instant a long chain's motion passes a singular position, by Newton's method on
+the signed smallest singular value, where the exact singular-value ratio is costly.
+
+Between two samples the constraint Jacobian of a banded mechanism (a chain of loops) is
+followed along the samples' interpolant. At a trial instant the left singular vectors of
+its smallest singular values come from inverse iteration on its Gram matrix ``J J^T``
+(a banded Cholesky, O(rows band^2)), the right one from ``J^T w``; with the two held
+fixed, ``w . J(x) n`` is the smallest singular value with a sign, which passes zero at
+the instant, and its slope is that value's derivative. Each Newton step takes the
+vectors again at the new trial, so the steps converge quadratically to where the
+smallest singular value is zero, where several of them are at once too (a chain of
+identical loops loses as many ranks as it has loops at the same instant: the vectors are
+then any mix of theirs, and ``w . J n`` still passes zero there).
+
+The exact ratio (:func:`~cmm_dae.equations.kinematics.singular_ratio`, O(rows^2 band))
+is then taken once, at the instant found: the caller keeps the instant only where it is
+below :data:`TIP_RATIO` (the motion passes the singular position itself, and the ratio's
+minimum is there); else it searches the ratio's minimum as before.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy.linalg.lapack import dpbtrf, dpbtrs
+
+from ..equations import banded
+from ..equations.kinematics import active_values_at, gram_band
+from ..equations.model import Model
+from .instant import hermite, interval_minimum
+
+__all__ = ["TIP_RATIO", "interval_instant", "newton_tip"]
+
+#: The exact ratio at the instant below which it is taken as the ratio's minimum (the
+#: motion passes through the singular position; round-off leaves about 1e-14 there).
+TIP_RATIO = 1e-9
+#: Newton steps at most: from a grid point 1/128 of an interval from the instant, two or
+#: three steps reach round-off (A02 with 32 loops: the smallest singular value 1.3e-5,
+#: 6.6e-10, 1.9e-14; a fourth step, from vectors that round-off decides, goes up again).
+STEPS = 8
+#: The step (fraction of the interval) of the central difference that gives the slope.
+DIFF = 1e-6
+#: Inverse iterations a step (the collapsed singular values are 1e-3 or less of the
+#: others there: each iteration gains that factor or more).
+ITERATIONS = 2
+
+
+def interval_instant(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray,
+                     at: Callable[[float], float], s: np.ndarray, grid: np.ndarray
+                     ) -> tuple[float, float]:
+    """:func:`~.instant.interval_minimum` (the smallest singular-value ratio ``at(x)`` on
+    the samples' interpolant between two samples, ``ends``: t, q, v at each, and its
+    fraction x of the interval, from a measure ``grid`` of it at the fractions ``s``),
+    found on a banded mechanism by :func:`newton_tip` from the grid's lowest point and
+    one exact ratio where the motion passes the singular position itself: with 32 loops
+    the search took six exact ratios of 2 ms each."""
+    band = gram_band(model, act) if 0 < act.size <= model.nq else None
+    if band is not None:
+        k = int(np.argmin(grid))
+        lo, hi = (s[k - 1] if k > 0 else 0.0), (s[k + 1] if k < s.size - 1 else 1.0)
+
+        def values_at(x: float) -> np.ndarray:
+            tx = float(ends[0] + x * (ends[3] - ends[0]))
+            return active_values_at(model, act, hermite(*ends, tx)[0], tx, p)
+
+        x = newton_tip(values_at, band, model.nq, float(lo), float(hi), float(s[k]))
+        if x is not None:
+            r = at(x)
+            if r < TIP_RATIO:
+                return x, r
+    return interval_minimum(at, s, grid)
+
+
+def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchur,
+               nq: int, lo: float, hi: float, x0: float) -> float | None:
+    """Where the smallest singular value of the banded Jacobian ``J(x)`` is zero, by
+    Newton's method from ``x0`` inside ``[lo, hi]``.
+
+    Parameters
+    ----------
+    values_at : callable
+        x -> J(x)'s structural nonzeros (at ``band.rows``, ``band.cols``), x a fraction
+        of the sample interval.
+    band : BandedSchur
+        The Gram matrix's banded structure (:func:`~cmm_dae.equations.banded.structure`).
+    nq : int
+        J's columns.
+    lo, hi, x0 : float
+        The bracket and the start (fractions of the interval).
+
+    Returns
+    -------
+    float or None
+        The instant's fraction of the interval: the trial where the smallest singular
+        value was least, once a step no longer lowers it; None where a step leaves the
+        bracket, a Gram matrix cannot be factored or the steps do not settle.
+    """
+    x, best = x0, (np.inf, x0)
+    for _ in range(STEPS):
+        vals = values_at(x)
+        w = _left_vector(vals, band)
+        if w is None:
+            return None
+        rows, cols = band.rows, band.cols
+        u = np.bincount(cols, weights=vals * w[rows], minlength=nq)
+        norm = float(np.linalg.norm(u))  # the smallest singular value at x
+        if not norm < best[0]:
+            # at the instant the value is round-off (or the least of a near miss), the
+            # vectors any mix of the collapsed ones, and a step from there lands further
+            return best[1]
+        best = (norm, x)
+        if norm == 0.0:
+            return x  # exactly singular here
+        weights = w[rows] * (u[cols] / norm)  # w . J n = values . weights
+        h = DIFF * (hi - lo)
+        slope = float((values_at(x + h) - values_at(x - h)) @ weights) / (2.0 * h)
+        if not np.isfinite(slope) or slope == 0.0:
+            return None
+        x -= norm / slope
+        if not lo <= x <= hi:
+            return None
+    return None
+
+
+def _left_vector(vals: np.ndarray, band: banded.BandedSchur) -> np.ndarray | None:
+    """A unit vector in the span of ``J J^T``'s eigenvectors of its smallest eigenvalues
+    (J's left singular vectors, in J's row order), by inverse iteration on the banded
+    Gram matrix shifted by round-off times its largest diagonal entry (positive definite
+    also where J is singular); None where it cannot be factored."""
+    low = banded.lower_blocks(band, vals[:, None])
+    low[0] += 1e-14 * float(np.max(low[0]))
+    c, info = dpbtrf(low, lower=1)
+    if info != 0:
+        return None
+    # (a fixed start without symmetry: a chain's identical loops give symmetric vectors)
+    y = 1.0 + 0.5 * np.sin(np.arange(band.m))
+    for _ in range(ITERATIONS):
+        y, info = dpbtrs(c, y, lower=1)
+        if info != 0:
+            return None
+        y /= np.linalg.norm(y)
+    w = np.empty(band.m)
+    w[band.perm] = y  # new row i is old row perm[i]
+    return w

@@ -1,0 +1,106 @@
+"""The instant a banded Jacobian loses rank, by Newton's method on the signed smallest
+singular value (:mod:`cmm_dae.singular.tip`): against a closed form where several
+singular values collapse at once with different slopes, and against the ratio's
+parabolic search it replaces on A02's logged passages."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cmm_dae.equations import banded
+from cmm_dae.singular.tip import TIP_RATIO, newton_tip
+
+X_STAR = 0.3712345678901234
+BLOCKS = 10  # 4 x 4 blocks, one more (zero) column: 40 rows, 41 columns, banded
+
+
+def _blocks(x: float, miss: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """J(x) = blockdiag(G(x) D_j(x)): each block a rotation (turning with x) of a diagonal
+    whose last entry is c_j (x - X_STAR), sqrt of that squared plus ``miss`` squared for
+    a near miss; the rest bounded away from zero. Its smallest singular value is
+    min_j |c_j| |x - X_STAR| (BLOCKS of them collapse there at once)."""
+    rows, cols, vals = [], [], []
+    for j in range(BLOCKS):
+        c = 0.5 + 0.17 * j
+        last = c * (x - X_STAR) if miss == 0.0 else math.hypot(c * (x - X_STAR), miss)
+        d = np.array([1.0 + 0.1 * j, 2.0, 0.7, last])
+        th = 0.3 + 2.0 * x + 0.05 * j
+        g = np.eye(4)
+        g[np.ix_([1, 3], [1, 3])] = [[math.cos(th), -math.sin(th)],
+                                     [math.sin(th), math.cos(th)]]
+        b = g @ np.diag(d)
+        for r in range(4):
+            for k in range(4):
+                rows.append(4 * j + r)
+                cols.append(4 * j + k)
+                vals.append(b[r, k])
+    return np.array(rows), np.array(cols), np.array(vals)
+
+
+def test_newton_finds_where_ten_singular_values_collapse_at_once():
+    rows, cols, _ = _blocks(0.0)
+    band = banded.structure(rows, cols, 4 * BLOCKS)
+    assert band is not None
+    calls = []
+
+    def values_at(x: float) -> np.ndarray:
+        calls.append(x)
+        return _blocks(x)[2]
+
+    x = newton_tip(values_at, band, 4 * BLOCKS + 1, 0.3, 0.45, 0.33)
+    assert x is not None
+    assert abs(x - X_STAR) <= 1e-13  # measured 0 to 5.6e-17
+    assert len(calls) <= 20  # (three J evaluations a step)
+    # a near miss (smallest singular value 1e-7 at best): the least value's place
+    rows, cols, _ = _blocks(0.0, 1e-7)
+    x = newton_tip(lambda x: _blocks(x, 1e-7)[2], band, 4 * BLOCKS + 1, 0.3, 0.45, 0.44)
+    assert x is None or abs(x - X_STAR) <= 1e-6
+
+
+def test_newton_gives_up_outside_its_bracket():
+    rows, cols, _ = _blocks(0.0)
+    band = banded.structure(rows, cols, 4 * BLOCKS)
+    # the instant lies outside [0.4, 0.45]: the first step leaves it
+    assert newton_tip(lambda x: _blocks(x)[2], band, 4 * BLOCKS + 1, 0.4, 0.45, 0.41) is None
+
+
+@pytest.mark.parametrize("loops", [8, 32])
+def test_a02_passages_by_newton_are_the_ratios_minimum(loops):
+    """A02's two logged passages (rtol 1e-3): the instants the parabolic search on the
+    exact ratio finds (to 1e-9 of the interval), with a lower ratio there and two exact
+    ratios instead of twelve."""
+    import cmm_dae as cd
+    from cmm_dae.description import iftomm
+    from cmm_dae.simulation import passage
+    from cmm_dae.singular import tip
+
+    mech = iftomm.a02_four_bar(loops)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    p, t, q, v = model.params(), res.t, res.data["q"], res.data["v"]
+    ratio, newton = passage.singular_ratio, tip.newton_tip
+    counted: list[int] = []
+
+    def counting(*args):
+        counted.append(1)
+        return ratio(*args)
+
+    runs = {}
+    for name, fn in (("newton", newton), ("parabola", lambda *a: None)):
+        counted.clear()
+        passage.singular_ratio, tip.newton_tip = counting, fn
+        try:
+            runs[name] = (passage.passages(model, p, t, q, v, start=False), len(counted))
+        finally:
+            passage.singular_ratio, tip.newton_tip = ratio, newton
+    (by_newton, n_newton), (by_parabola, n_parabola) = runs["newton"], runs["parabola"]
+    assert len(by_newton) == len(by_parabola) == 2
+    for a, b in zip(by_newton, by_parabola, strict=True):
+        assert a.interval == b.interval
+        h = t[a.interval + 1] - t[a.interval]
+        assert abs(a.t - b.t) <= 1e-9 * h  # measured 1.3e-11 to 1.9e-11 of the interval
+        assert a.ratio <= 1e-12 < TIP_RATIO and b.ratio <= 1e-12  # 6e-16 to 1.5e-13
+    assert n_parabola - n_newton == 10  # five exact ratios fewer for each passage
