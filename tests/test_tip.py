@@ -52,12 +52,12 @@ def test_newton_finds_where_ten_singular_values_collapse_at_once():
 
     x = newton_tip(values_at, band, 4 * BLOCKS + 1, 0.3, 0.45, 0.33)
     assert x is not None
-    assert abs(x - X_STAR) <= 1e-13  # measured 0 to 5.6e-17
-    assert len(calls) <= 20  # (three J evaluations a step)
+    assert abs(x - X_STAR) <= 1e-13  # measured 0 from six starts in the bracket
+    assert len(calls) <= 22  # measured 16 (three J evaluations a step)
     # a near miss (smallest singular value 1e-7 at best): the least value's place
     rows, cols, _ = _blocks(0.0, 1e-7)
     x = newton_tip(lambda x: _blocks(x, 1e-7)[2], band, 4 * BLOCKS + 1, 0.3, 0.45, 0.44)
-    assert x is None or abs(x - X_STAR) <= 1e-6
+    assert x is None or abs(x - X_STAR) <= 1e-6  # measured 8.9e-9
 
 
 def test_newton_gives_up_outside_its_bracket():
