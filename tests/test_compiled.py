@@ -14,6 +14,8 @@ import pytest
 
 import cmm_dae as cd
 from cmm_dae.core.errors import SolverError, Status
+from cmm_dae.description import iftomm
+from cmm_dae.equations import banded
 from cmm_dae.integrators import csegment
 
 pytestmark = pytest.mark.skipif(csegment.c_compiler() is None, reason="needs a C compiler")
@@ -320,3 +322,40 @@ def test_cli_says_which_path_ran(capsys, monkeypatch, tmp_path):
     with pytest.raises(SystemExit) as stop:
         main(["run", "pendulum_stop", "--compiled", "--no-compiled"])
     assert stop.value.code == 2
+
+
+def test_ida_order_makes_a02s_jacobian_a_band():
+    """IDA's unknowns reordered (reverse Cuthill-McKee): a permutation under which every
+    structural nonzero of A02's Jacobian (8 loops, 130 unknowns) lies within the band's
+    half widths, themselves narrow (measured 9 below, 8 above)."""
+    model = cd.Model(iftomm.a02_four_bar(8))
+    colind, row = model.ida.jac_pattern.get_ccs()
+    colptr, rowind = np.asarray(colind), np.asarray(row)
+    n = model.ida.N
+    perm, ml, mu = banded.ida_order(colptr, rowind, n)
+    assert perm.flags.c_contiguous and np.array_equal(np.sort(perm), np.arange(n))
+    inv = np.empty(n, dtype=int)
+    inv[perm] = np.arange(n)
+    d = inv[rowind] - inv[np.repeat(np.arange(n), np.diff(colptr))]
+    assert d.max() == ml and -d.min() == mu and ml + mu <= 20
+
+
+def test_band_lu_segment_against_the_closed_form():
+    """A02 with 8 loops in C: linsolver "auto" factors the reordered Jacobian by band LU,
+    "sparse" by SuperLU_MT. Before the first singular position (0.6 s, rtol 1e-10) both
+    follow the closed-form crank (measured 1.2e-9 and 1.0e-9 m) and each other (3.2e-10 m,
+    multipliers 1.7e-9 of the largest)."""
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    runs = {ls: cd.run_dae(mech, 0.6, rtol=1e-10, model=model, linsolver=ls, compiled=True)
+            for ls in ("auto", "sparse")}
+    for ls, solver in (("auto", "band"), ("sparse", "sparse")):
+        res = runs[ls]
+        assert res.success and res.meta["compiled"] and res.meta["linsolver"] == solver
+        err = np.hypot(*(iftomm.crank_tip(res) - iftomm.a02_reference(8, res.t)).T)
+        assert np.max(err) <= 5e-9
+    band, sparse = runs["auto"], runs["sparse"]
+    assert np.array_equal(band.t, sparse.t)
+    assert np.max(np.abs(band.data["q"] - sparse.data["q"])) <= 3e-9
+    lam = np.max(np.abs(sparse.data["lam"]))
+    assert np.max(np.abs(band.data["lam"] - sparse.data["lam"])) <= 2e-8 * lam

@@ -32,7 +32,7 @@ from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.errors import CompileNotice
 from ..core.progress import Bar
-from ..equations import compiled, kkt
+from ..equations import banded, compiled, kkt
 from ..equations.codegen import NotBuiltError, build_library, c_compiler, cache_dir, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -47,7 +47,7 @@ SEG_MORE, SEG_STALLED = 100, 101
 CHUNK = 2048
 _SOURCE = Path(__file__).with_name("segment.c")
 _SUNDIALS = ("ida", "core", "nvecserial", "sunmatrixdense", "sunlinsoldense",
-             "sunmatrixsparse", "sunlinsolsuperlumt")
+             "sunmatrixsparse", "sunlinsolsuperlumt", "sunmatrixband", "sunlinsolband")
 _P = ctypes.c_void_p
 _D = ctypes.POINTER(ctypes.c_double)
 _I = ctypes.POINTER(ctypes.c_int)
@@ -98,16 +98,12 @@ def driver(build: bool = True) -> ctypes.CDLL:
                              flags=(*map(str, libs), f"-Wl,-rpath,{libs[0].parent}"))
         lib = ctypes.CDLL(str(path))
         lib.cmm_seg_new.restype = _P
-        lib.cmm_seg_new.argtypes = [
-            ctypes.c_int, ctypes.c_int, ctypes.c_int, _P, _P, _P, _P, _P, _P, _P, _P, _D,
-            ctypes.c_double, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-            ctypes.c_long,
-            ctypes.c_long, ctypes.c_int, _D, ctypes.c_int, ctypes.c_int, ctypes.c_int, _I, _I,
-            ctypes.c_int]
-        lib.cmm_seg_run.restype = ctypes.c_int
-        lib.cmm_seg_run.argtypes = [_P, _D, _D, ctypes.c_int, _I, _I, _L]
-        lib.cmm_seg_free.restype = None
-        lib.cmm_seg_free.argtypes = [_P]
+        n, x, c_long = ctypes.c_int, ctypes.c_double, ctypes.c_long
+        lib.cmm_seg_new.argtypes = [n, n, n, *[_P] * 8, _D, x, _D, _D, _D, x, x, x, c_long,
+                                    c_long, n, _D, n, n, n, _I, _I, n, _I, n, n]
+        lib.cmm_seg_run.restype = n
+        lib.cmm_seg_run.argtypes = [_P, _D, _D, n, _I, _I, _L]
+        lib.cmm_seg_free.restype, lib.cmm_seg_free.argtypes = None, [_P]
         _driver = lib
     return _driver
 
@@ -157,6 +153,8 @@ class CompiledModel:
         colind, row = model.ida.jac_pattern.get_ccs()
         self.colptr = np.asarray(colind, dtype=np.intc)
         self.rowind = np.asarray(row, dtype=np.intc)
+        #: IDA's unknowns reordered into a band, where :meth:`run` is asked for one
+        self.band = banded.ida_order(self.colptr, self.rowind, model.ida.N) if sparse else None
         funcs = [res, jac]
         self.fns = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs,
                                                  build=build)))
@@ -196,12 +194,13 @@ class CompiledModel:
     def run(self, p: np.ndarray, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,
             max_steps: int, budget: int,
-            relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None
-            ) -> SegmentRun:
+            relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
+            band: bool = False) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
-        ``events``: the configuration's :meth:`event_functions`."""
-        model, lib = self.model, self.lib
+        ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
+        Jacobian is factored as a band where reordering makes it one (:attr:`band`)."""
+        model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
         D = ctypes.c_double
@@ -214,7 +213,8 @@ class CompiledModel:
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
             D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed),
             tout_.ctypes.data_as(_D), tout_.size, int(tspan.size == 2), self.rowind.size,
-            self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse))
+            self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse),
+            *((order[0].ctypes.data_as(_I), order[1], order[2]) if order else (None, 0, 0)))
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
         # IDA's coordinates, rates and works are recorded (the differential unknowns)

@@ -138,7 +138,8 @@ class IdaCallbacks:
                                      self.has_push)
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
-                       fns, len(self.triggers), self.opts.progress)
+                       fns, len(self.triggers), self.opts.progress,
+                       band=self.opts.linsolver == "auto")
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted
         return r

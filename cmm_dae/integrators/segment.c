@@ -5,8 +5,10 @@
  * The mechanism's functions are CasADi-generated C (compiled separately, passed in as
  * function pointers), so this driver is built once per machine. It does what
  * cmm_dae/integrators/ida.py asks of scikit-sundae, in the same order and with the same IDA options,
- * so a segment gives the same steps and numbers as the Python path to round-off; the
- * hybrid policy (what an event means) stays in Python.
+ * so a segment gives the same steps and numbers as the Python path to round-off (with one
+ * exception: a sparse Jacobian that reorders into a narrow band is factored by band LU
+ * here, by SuperLU_MT there, so their round-off differs); the hybrid policy (what an
+ * event means) stays in Python.
  *
  * The wheel ships no SUNDIALS headers: the few prototypes used are declared here, for
  * SUNDIALS 7 built with double precision, 32-bit indices and no MPI (as scikit-sundae's).
@@ -42,6 +44,11 @@ sunrealtype *SUNSparseMatrix_Data(SUNMatrix a);
 sunindextype *SUNSparseMatrix_IndexValues(SUNMatrix a);
 sunindextype *SUNSparseMatrix_IndexPointers(SUNMatrix a);
 SUNLinearSolver SUNLinSol_SuperLUMT(N_Vector y, SUNMatrix a, int threads, SUNContext ctx);
+SUNMatrix SUNBandMatrix(sunindextype n, sunindextype mu, sunindextype ml, SUNContext ctx);
+sunrealtype *SUNBandMatrix_Data(SUNMatrix a);
+sunindextype SUNBandMatrix_LData(SUNMatrix a);
+sunrealtype *SUNBandMatrix_Column(SUNMatrix a, sunindextype j);
+SUNLinearSolver SUNLinSol_Band(N_Vector y, SUNMatrix a, SUNContext ctx);
 int SUNLinSolFree(SUNLinearSolver s);
 void *IDACreate(SUNContext ctx);
 int IDAInit(void *mem, IDAResFn res, sunrealtype t0, N_Vector y0, N_Vector yp0);
@@ -96,6 +103,12 @@ typedef struct {
     int nnz, sparse;           /* the Jacobian's CSC pattern; sparse: SuperLU_MT, else */
     const int *colptr, *rowind; /* the nonzeros are scattered into a dense matrix */
     double *jbuf;
+    /* band: IDA's unknowns and residuals are the mechanism's reordered (IDA's i-th is the
+     * mechanism's perm[i]) so that the Jacobian is a band (ml below, mu above the
+     * diagonal), solved by band LU; each nonzero goes to bpos[k] in the band's data */
+    const int *perm;
+    int *bpos;
+    double *ybuf, *ypbuf, *rbuf;
     double tbuf, cjbuf, near;
     /* IDA */
     SUNContext ctx;
@@ -128,15 +141,29 @@ static void fn_free(Fn *fn) {
     free(fn->arg); free(fn->res); free(fn->iw); free(fn->w);
 }
 
+/* IDA's vector x in the mechanism's order (x itself where nothing is reordered) */
+static const double *unperm(Seg *s, N_Vector x, double *buf) {
+    const double *a = N_VGetArrayPointer(x);
+    int i;
+    if (s->perm == NULL) return a;
+    for (i = 0; i < s->N; i++) buf[s->perm[i]] = a[i];
+    return buf;
+}
+
 static int resfn(sunrealtype t, N_Vector y, N_Vector yp, N_Vector rr, void *ud) {
     Seg *s = ud;
+    double *r = N_VGetArrayPointer(rr);
+    int i;
     s->tbuf = t;
     s->res.arg[0] = &s->tbuf;
-    s->res.arg[1] = N_VGetArrayPointer(y);
-    s->res.arg[2] = N_VGetArrayPointer(yp);
+    s->res.arg[1] = unperm(s, y, s->ybuf);
+    s->res.arg[2] = unperm(s, yp, s->ypbuf);
     s->res.arg[3] = s->p;
-    s->res.res[0] = N_VGetArrayPointer(rr);
-    return s->res.f(s->res.arg, s->res.res, s->res.iw, s->res.w, 0) ? -1 : 0;
+    s->res.res[0] = s->perm ? s->rbuf : r;
+    if (s->res.f(s->res.arg, s->res.res, s->res.iw, s->res.w, 0)) return -1;
+    if (s->perm)
+        for (i = 0; i < s->N; i++) r[i] = s->rbuf[s->perm[i]];
+    return 0;
 }
 
 static int jacfn(sunrealtype t, sunrealtype cj, N_Vector y, N_Vector yp, N_Vector rr,
@@ -146,15 +173,24 @@ static int jacfn(sunrealtype t, sunrealtype cj, N_Vector y, N_Vector yp, N_Vecto
     s->tbuf = t;
     s->cjbuf = cj;
     s->jac.arg[0] = &s->tbuf;
-    s->jac.arg[1] = N_VGetArrayPointer(y);
-    s->jac.arg[2] = N_VGetArrayPointer(yp);
+    s->jac.arg[1] = unperm(s, y, s->ybuf);
+    s->jac.arg[2] = unperm(s, yp, s->ypbuf);
     s->jac.arg[3] = &s->cjbuf;
     s->jac.arg[4] = s->p;
-    if (s->sparse) { /* CasADi's nonzeros in CSC order, on its own pattern */
+    if (s->sparse && !s->perm) { /* CasADi's nonzeros in CSC order, on its pattern */
         memcpy(SUNSparseMatrix_IndexPointers(J), s->colptr, sizeof(int) * (s->N + 1));
         memcpy(SUNSparseMatrix_IndexValues(J), s->rowind, sizeof(int) * s->nnz);
         s->jac.res[0] = SUNSparseMatrix_Data(J);
         return s->jac.f(s->jac.arg, s->jac.res, s->jac.iw, s->jac.w, 0) ? -1 : 0;
+    }
+    if (s->perm) { /* band: the nonzeros scattered into the band's storage */
+        double *data = SUNBandMatrix_Data(J);
+        int k;
+        s->jac.res[0] = s->jbuf;
+        if (s->jac.f(s->jac.arg, s->jac.res, s->jac.iw, s->jac.w, 0)) return -1;
+        memset(data, 0, sizeof(double) * (size_t)SUNBandMatrix_LData(J));
+        for (k = 0; k < s->nnz; k++) data[s->bpos[k]] = s->jbuf[k];
+        return 0;
     }
     /* dense: generated code for the nonzeros only (a densified Jacobian's C code takes
      * minutes to compile), scattered into the column-major matrix */
@@ -173,8 +209,9 @@ static int jacfn(sunrealtype t, sunrealtype cj, N_Vector y, N_Vector yp, N_Vecto
 
 static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *ud) {
     Seg *s = ud;
+    const double *yy = unperm(s, y, s->ybuf);
     (void)yp;
-    s->ev.arg[0] = N_VGetArrayPointer(y);
+    s->ev.arg[0] = yy;
     s->ev.res[0] = g;
     s->ev.res[1] = &s->near;
     if (s->ev.f(s->ev.arg, s->ev.res, s->ev.iw, s->ev.w, 0)) return -1;
@@ -182,7 +219,7 @@ static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *
     if (s->has_evx && (s->relaxed || s->near < 0.0)) {
         s->tbuf = t;
         s->evx.arg[0] = &s->tbuf;
-        s->evx.arg[1] = N_VGetArrayPointer(y);
+        s->evx.arg[1] = yy;
         s->evx.arg[2] = s->p;
         s->evx.res[0] = g;
         if (s->evx.f(s->evx.arg, s->evx.res, s->evx.iw, s->evx.w, 0)) return -1;
@@ -203,14 +240,17 @@ void cmm_seg_free(Seg *s) {
     fn_free(&s->res); fn_free(&s->jac); fn_free(&s->ev); fn_free(&s->evx);
     free(s->dir);
     free(s->jbuf);
+    free(s->bpos); free(s->ybuf); free(s->ypbuf); free(s->rbuf);
     free(s);
 }
 
 /* A new segment from (t0, y0, yp0). tout: the output times after t0 (its last entry is the
  * stop time); onestep: record IDA's own steps up to tout[nout - 1] instead. jac writes the
  * Jacobian's nnz nonzeros of the CSC pattern (colptr, rowind); sparse: solved by SuperLU_MT
- * on one thread, as scikit-sundae's "sparse", else by dense LU. Returns NULL when SUNDIALS
- * cannot be set up (out of memory). */
+ * on one thread, as scikit-sundae's "sparse", else by dense LU; perm (not NULL): IDA's
+ * unknowns and residuals reordered (its i-th is the mechanism's perm[i]) into a band of
+ * half widths ml and mu, solved by band LU. Returns NULL when SUNDIALS cannot be set up
+ * (out of memory). */
 Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  cafun res, cawork res_w, cafun jac, cawork jac_w,
                  cafun ev, cawork ev_w, cafun evx, cawork evx_w, double *p,
@@ -218,7 +258,8 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  double rtol, double first_step, double min_step, long max_steps,
                  long budget, int relaxed,
                  const double *tout, int nout, int onestep,
-                 int nnz, const int *colptr, const int *rowind, int sparse) {
+                 int nnz, const int *colptr, const int *rowind, int sparse,
+                 const int *perm, int ml, int mu) {
     Seg *s = calloc(1, sizeof(Seg));
     int i, ok = 1;
     if (s == NULL) return NULL;
@@ -237,6 +278,7 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     s->sparse = sparse;
     s->colptr = colptr;
     s->rowind = rowind;
+    s->perm = perm;
     if (fn_init(&s->res, res, res_w) || fn_init(&s->jac, jac, jac_w)
         || fn_init(&s->ev, ev, ev_w) || fn_init(&s->evx, evx, evx_w)) {
         cmm_seg_free(s);
@@ -250,13 +292,35 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     s->id = N_VNew_Serial(N, s->ctx);
     s->dir = malloc(sizeof(int) * (ne > 0 ? ne : 1));
     if (!s->yy || !s->yp || !s->atol || !s->id || !s->dir) { cmm_seg_free(s); return NULL; }
-    memcpy(N_VGetArrayPointer(s->yy), y0, sizeof(double) * N);
-    memcpy(N_VGetArrayPointer(s->yp), yp0, sizeof(double) * N);
-    memcpy(N_VGetArrayPointer(s->atol), atol, sizeof(double) * N);
-    for (i = 0; i < N; i++) N_VGetArrayPointer(s->id)[i] = i < nalg_from ? 1.0 : 0.0;
+    for (i = 0; i < N; i++) { /* in IDA's order */
+        int j = perm ? perm[i] : i;
+        N_VGetArrayPointer(s->yy)[i] = y0[j];
+        N_VGetArrayPointer(s->yp)[i] = yp0[j];
+        N_VGetArrayPointer(s->atol)[i] = atol[j];
+        N_VGetArrayPointer(s->id)[i] = j < nalg_from ? 1.0 : 0.0;
+    }
     s->jbuf = malloc(sizeof(double) * (nnz > 0 ? nnz : 1));
     if (!s->jbuf) { cmm_seg_free(s); return NULL; }
-    if (sparse) {
+    if (perm) {
+        int j, k, *iperm = malloc(sizeof(int) * N);
+        double *data;
+        s->ybuf = malloc(sizeof(double) * N);
+        s->ypbuf = malloc(sizeof(double) * N);
+        s->rbuf = malloc(sizeof(double) * N);
+        s->bpos = malloc(sizeof(int) * (nnz > 0 ? nnz : 1));
+        s->A = SUNBandMatrix(N, mu, ml, s->ctx);
+        s->LS = s->A ? SUNLinSol_Band(s->yy, s->A, s->ctx) : NULL;
+        if (!iperm || !s->ybuf || !s->ypbuf || !s->rbuf || !s->bpos || !s->LS) {
+            free(iperm); cmm_seg_free(s); return NULL;
+        }
+        for (i = 0; i < N; i++) iperm[perm[i]] = i;
+        data = SUNBandMatrix_Data(s->A);
+        for (j = 0; j < N; j++) /* nonzero k at (rowind[k], j): IDA's (iperm, iperm) */
+            for (k = colptr[j]; k < colptr[j + 1]; k++)
+                s->bpos[k] = (int)(SUNBandMatrix_Column(s->A, iperm[j]) - data)
+                             + iperm[rowind[k]] - iperm[j];
+        free(iperm);
+    } else if (sparse) {
         s->A = SUNSparseMatrix(N, N, nnz, CSC_MAT, s->ctx);
         s->LS = s->A ? SUNLinSol_SuperLUMT(s->yy, s->A, 1, s->ctx) : NULL;
     } else {
@@ -309,7 +373,7 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
         else
             flag = IDASolve(s->mem, s->tout[s->next], &tt, s->yy, s->yp, IDA_NORMAL);
         T[k] = tt;
-        memcpy(Y + (size_t)k * s->ncol, N_VGetArrayPointer(s->yy), sizeof(double) * s->ncol);
+        memcpy(Y + (size_t)k * s->ncol, unperm(s, s->yy, s->ybuf), sizeof(double) * s->ncol);
         k++;
         if (flag == IDA_ROOT_RETURN) {
             IDAGetRootInfo(s->mem, info);

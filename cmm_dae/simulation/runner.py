@@ -121,7 +121,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     linsolver : {"auto", "dense", "sparse"}
         IDA's linear solver: dense LU, or sparse LU (SuperLU_MT) on the Jacobian's
         structural pattern; "auto": sparse from 120 IDA unknowns where at most 5 % of the
-        Jacobian is nonzero (where it wins), for the compiled segment too.
+        Jacobian is nonzero, in C by band LU where reordering makes it a band ("band").
 
     Returns
     -------
@@ -308,9 +308,11 @@ def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], sta
                               else None)
     # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
     # falls back to the Python path where it cannot be built)
-    res.meta["linsolver"] = (("sparse" if integ.sparse else "dense")
-                             if hasattr(integ, "sparse") else None)
-    res.meta["compiled"] = getattr(integ, "c", None) is not None
+    c = getattr(integ, "c", None)  # (band: the compiled segment's, see csegment.run)
+    res.meta["linsolver"] = None if not hasattr(integ, "sparse") else "dense" \
+        if not integ.sparse else "band" if c is not None and c.band is not None \
+        and opts.linsolver == "auto" else "sparse"
+    res.meta["compiled"] = c is not None
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if "lam" not in res.data and res.t.size:  # post-processing ran out of memory: the
         # states are kept (build_result), the run fails with them
