@@ -89,7 +89,8 @@ def _simulating(sub) -> None:
     _compiled_flags(r)
     r.add_argument("--linsolver", choices=("auto", "dense", "sparse"), default="auto",
                    help="IDA's linear solver (auto: sparse from 120 unknowns where at most "
-                        "5%% of the Jacobian is nonzero)")
+                        "5%% of the Jacobian is nonzero; in C, band LU where it reorders "
+                        "into a narrow band)")
     r.add_argument("--branch", type=_branch, default="continue", metavar="JOINT:SIGN",
                    help="at singular positions take the branch on which JOINT moves with "
                         "SIGN (+1 or -1), e.g. G1:+1 (default: continue, the branch of the "

@@ -229,6 +229,33 @@ def test_auto_builds_after_a_long_run_and_says_so_once(monkeypatch, tmp_path):
     assert cd.run_dae(other, 0.2).meta["compiled"] is True
 
 
+def test_auto_builds_after_short_runs_that_add_up(monkeypatch, tmp_path):
+    """A sweep of short runs of one model under "auto": their Python time adds up, and the
+    build starts once the sum reaches the threshold (here 1 s: 0.6 s, then 1.2 s), not
+    with the first run; later runs of the model are compiled."""
+    import warnings
+
+    from cmm_dae.core.errors import CompileNotice
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    csegment.clear()
+    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 1.0)
+    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.1)
+    monkeypatch.setattr(csegment, "_noticed", True)  # (said already: quiet here)
+    mech = cd.load(cd.example("pendulum_stop"))
+    model = cd.Model(mech)
+    assert not cd.run_dae(mech, 0.2, model=model).meta["compiled"]
+    monkeypatch.setitem(csegment._spent, model, 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CompileNotice)
+        csegment.build_later(model, False, "auto", None, 0.6)
+        assert csegment._models[model].get(False, csegment._MISSING) is csegment._MISSING
+        csegment.build_later(model, False, "auto", None, 0.6)
+        assert csegment._models[model][False] is not csegment._MISSING  # building or built
+    csegment.clear()  # waits for the build
+    assert cd.run_dae(mech, 0.2, model=model).meta["compiled"] is True
+
+
 def test_auto_without_a_compiler_is_quiet(monkeypatch, tmp_path):
     """No compiler: "auto" runs the Python path with no warning and builds nothing;
     an unknown value of compiled is refused by name."""
