@@ -33,11 +33,12 @@ from .core.errors import CmmError, SolverError
 
 def _compiled_flags(parser: argparse.ArgumentParser) -> None:
     """--compiled / --no-compiled (one of them); neither: "auto" (C where the build is
-    cached)."""
+    cached or short)."""
     p = parser.add_mutually_exclusive_group()
     p.add_argument("--compiled", dest="compiled", action="store_const", const=True,
                    default="auto", help="run IDA's segments in C, built now if need be "
-                   "(needs a C compiler; cached); default: in C where built already")
+                   "(needs a C compiler; cached); default: in C where built already or "
+                   "where the build is short")
     p.add_argument("--no-compiled", dest="compiled", action="store_const", const=False,
                    help="run IDA's segments in Python")
 

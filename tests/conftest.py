@@ -3,8 +3,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import math
+import atexit
 import os
+import shutil
+import tempfile
 
 import pytest
 from hypothesis import Phase, settings
@@ -17,6 +19,17 @@ settings.register_profile("ci", max_examples=8, deadline=None, derandomize=True,
 settings.register_profile("dev", max_examples=100, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
+# "auto" builds nothing, before a run or after long runs (a chain of 48 loops would build
+# for 6 s into a cache thrown away with the test), in this process and the ones it starts,
+# from the start: module-scoped fixtures run before the per-test fixture below. The tests
+# of those rules set it themselves.
+os.environ["CMM_DAE_AUTO_BUILD"] = "0"
+# and the module-scoped fixtures, which run outside the per-test cache below, use one of
+# the session's, never the user's (a sweep's reference table found a build there, ran in
+# C, and differed from its dask workers' in the last digits)
+os.environ["CMM_DAE_CACHE"] = tempfile.mkdtemp(prefix="cmm_dae_tests_")
+atexit.register(shutil.rmtree, os.environ["CMM_DAE_CACHE"], ignore_errors=True)
+
 
 @pytest.fixture(autouse=True)
 def _empty_compiled_cache(request, tmp_path_factory, monkeypatch):
@@ -25,13 +38,10 @@ def _empty_compiled_cache(request, tmp_path_factory, monkeypatch):
     this worker (the path a test takes must not depend on the order of the tests), and the
     user's own cache is never written. A module that shares one cache among its tests
     (``SHARED_CACHE = True``) sets it itself."""
-    from cmm_dae.integrators import csegment
+    from cmm_dae.integrators import cbuild
 
     if not getattr(request.module, "SHARED_CACHE", False):
         monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cmm_cache")))
-    # no background builds after long runs (a chain of 48 loops would build for 6 s into
-    # a cache thrown away with the test); the tests of that rule set it themselves
-    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", math.inf)
-    csegment.clear()
+    cbuild.clear()
     yield
-    csegment.clear()
+    cbuild.clear()

@@ -16,9 +16,9 @@ import cmm_dae as cd
 from cmm_dae.core.errors import SolverError, Status
 from cmm_dae.description import iftomm
 from cmm_dae.equations import banded
-from cmm_dae.integrators import csegment
+from cmm_dae.integrators import cbuild, csegment
 
-pytestmark = pytest.mark.skipif(csegment.c_compiler() is None, reason="needs a C compiler")
+pytestmark = pytest.mark.skipif(cbuild.c_compiler() is None, reason="needs a C compiler")
 #: the module shares one build cache (the fixture below), not one per test (conftest)
 SHARED_CACHE = True
 
@@ -171,8 +171,8 @@ def test_another_scikit_sundae_falls_back_with_one_warning(monkeypatch):
     assert np.array_equal(res.joint("O").position, ref.joint("O").position)
     # the default ("auto") in a new process: the same single warning, the Python path
     monkeypatch.setattr(csegment, "_driver_error", None)
-    monkeypatch.setattr(csegment, "_warned", False)
-    csegment.clear()
+    monkeypatch.setattr(cbuild, "_warned", False)
+    cbuild.clear()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert not cd.run_dae(mech, 0.5).meta["compiled"]
@@ -185,13 +185,13 @@ def test_auto_runs_compiled_where_the_build_is_cached(monkeypatch, tmp_path):
     in the cache (no library written by that run), the compiled segment once it is; the
     same events and samples to 1e-9 s and the same crank torque to 1e-9 N m either way."""
     monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
-    csegment.clear()
+    cbuild.clear()
     mech = cd.load(cd.example("double_folded"))
     first = cd.run_dae(mech, 10.0)
     assert first.meta["compiled"] is False
     assert not list(tmp_path.glob("cmm_[!s]*.so"))  # only the driver, if any
     assert cd.run_dae(mech, 10.0, compiled=True).meta["compiled"] is True
-    csegment.clear()  # a new process: found in the cache
+    cbuild.clear()  # a new process: found in the cache
     again = cd.run_dae(cd.load(cd.example("double_folded")), 10.0)
     assert again.meta["compiled"] is True
     _same(first, again, {"effort": (first.driver("A").effort, again.driver("A").effort)})
@@ -207,25 +207,27 @@ def test_auto_builds_after_a_long_run_and_says_so_once(monkeypatch, tmp_path):
     from cmm_dae.core.errors import CompileNotice
 
     monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
-    csegment.clear()
+    cbuild.clear()
     mech = cd.load(cd.example("pendulum_stop"))
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         cd.run_dae(mech, 0.5)  # 2 s and twice the estimate: far above this run
     assert not seen
-    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 0.0)
-    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.0)
-    monkeypatch.setattr(csegment, "_noticed", False)
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "1")
+    monkeypatch.setattr(cbuild, "AUTO_BUILD_NOW", -1.0)  # (the build-later rule alone)
+    monkeypatch.setattr(cbuild, "AUTO_BUILD_AFTER", 0.0)
+    monkeypatch.setattr(cbuild, "build_estimate", lambda model: 0.0)
+    monkeypatch.setattr(cbuild, "_noticed", False)
     with pytest.warns(CompileNotice, match="in the background"):
         assert cd.run_dae(mech, 0.5).meta["compiled"] is False
-    csegment.clear()  # waits for the build
+    cbuild.clear()  # waits for the build
     assert cd.run_dae(mech, 0.5).meta["compiled"] is True
     other = cd.load(cd.example("slider_crank"))
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         cd.run_dae(other, 0.2)
     assert not [w for w in seen if issubclass(w.category, CompileNotice)]
-    csegment.clear()
+    cbuild.clear()
     assert cd.run_dae(other, 0.2).meta["compiled"] is True
 
 
@@ -238,22 +240,53 @@ def test_auto_builds_after_short_runs_that_add_up(monkeypatch, tmp_path):
     from cmm_dae.core.errors import CompileNotice
 
     monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
-    csegment.clear()
-    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 1.0)
-    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.1)
-    monkeypatch.setattr(csegment, "_noticed", True)  # (said already: quiet here)
+    cbuild.clear()
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "1")
+    monkeypatch.setattr(cbuild, "AUTO_BUILD_NOW", -1.0)
+    monkeypatch.setattr(cbuild, "AUTO_BUILD_AFTER", 1.0)
+    monkeypatch.setattr(cbuild, "build_estimate", lambda model: 0.1)
+    monkeypatch.setattr(cbuild, "_noticed", True)  # (said already: quiet here)
     mech = cd.load(cd.example("pendulum_stop"))
     model = cd.Model(mech)
     assert not cd.run_dae(mech, 0.2, model=model).meta["compiled"]
-    monkeypatch.setitem(csegment._spent, model, 0.0)
+    monkeypatch.setitem(cbuild._spent, model, 0.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error", CompileNotice)
-        csegment.build_later(model, False, "auto", None, 0.6)
-        assert csegment._models[model].get(False, csegment._MISSING) is csegment._MISSING
-        csegment.build_later(model, False, "auto", None, 0.6)
-        assert csegment._models[model][False] is not csegment._MISSING  # building or built
-    csegment.clear()  # waits for the build
+        cbuild.build_later(model, False, "auto", None, 0.6)
+        assert cbuild._models[model].get(False, cbuild._MISSING) is cbuild._MISSING
+        cbuild.build_later(model, False, "auto", None, 0.6)
+        assert cbuild._models[model][False] is not cbuild._MISSING  # building or built
+    cbuild.clear()  # waits for the build
     assert cd.run_dae(mech, 0.2, model=model).meta["compiled"] is True
+
+
+def test_auto_builds_a_short_build_before_the_first_run(monkeypatch, tmp_path):
+    """"auto" on a machine with a C compiler: a mechanism whose build is estimated short
+    (the pendulum with a stop, 0.56 s against AUTO_BUILD_NOW) is built before its first
+    run, which runs in C, quietly; one estimated longer runs in Python and builds
+    nothing; CMM_DAE_AUTO_BUILD=0 uses only what is cached."""
+    import warnings
+
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "1")
+    cbuild.clear()
+    mech = cd.load(cd.example("pendulum_stop"))
+    assert cbuild.build_estimate(cd.Model(mech)) < cbuild.AUTO_BUILD_NOW
+    with monkeypatch.context() as mp:
+        mp.setattr(cbuild, "AUTO_BUILD_NOW", 0.1)
+        assert cd.run_dae(mech, 0.5).meta["compiled"] is False
+    assert not list(tmp_path.glob("cmm_[!s]*.so"))
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "0")
+    cbuild.clear()
+    assert cd.run_dae(mech, 0.5).meta["compiled"] is False
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "1")
+    cbuild.clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # quiet
+        first = cd.run_dae(mech, 0.5)
+    assert first.meta["compiled"] is True and list(tmp_path.glob("cmm_[!s]*.so"))
+    py = cd.run_dae(mech, 0.5, compiled=False)
+    assert np.max(np.abs(first.joint("O").position - py.joint("O").position)) <= 1e-9
 
 
 def test_auto_without_a_compiler_is_quiet(monkeypatch, tmp_path):
@@ -262,10 +295,11 @@ def test_auto_without_a_compiler_is_quiet(monkeypatch, tmp_path):
     import warnings
 
     monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
-    monkeypatch.setattr(csegment, "c_compiler", lambda: None)
-    monkeypatch.setattr(csegment, "AUTO_BUILD_AFTER", 0.0)
-    monkeypatch.setattr(csegment, "build_estimate", lambda model: 0.0)
-    csegment.clear()
+    monkeypatch.setenv("CMM_DAE_AUTO_BUILD", "1")
+    monkeypatch.setattr(cbuild, "c_compiler", lambda: None)
+    monkeypatch.setattr(cbuild, "AUTO_BUILD_AFTER", 0.0)
+    monkeypatch.setattr(cbuild, "build_estimate", lambda model: 0.0)
+    cbuild.clear()
     mech = cd.load(cd.example("pendulum_stop"))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -316,7 +350,7 @@ def test_a_large_model_compiles_its_segment_alone():
     outs = compiled.instructions(model)
     assert 0 < outs <= compiled.OUTPUTS_BUDGET
     u = model.ida
-    assert csegment.build_estimate(model) == pytest.approx(
+    assert cbuild.build_estimate(model) == pytest.approx(
         0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
         + 0.2 + 2.5e-4 * outs)
     assert compiled.use_compiled(model) and model.outputs_compiled
@@ -338,10 +372,10 @@ def test_cli_says_which_path_ran(capsys, monkeypatch, tmp_path):
     from cmm_dae.cli import main
 
     monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
-    csegment.clear()
+    cbuild.clear()
     assert main(["run", "pendulum_stop", "--t-end", "0.2", "--compiled"]) == 0
     assert "(ida, in C)" in capsys.readouterr().out
-    csegment.clear()
+    cbuild.clear()
     assert main(["run", "pendulum_stop", "--t-end", "0.2"]) == 0
     assert "(ida, in C)" in capsys.readouterr().out
     assert main(["run", "pendulum_stop", "--t-end", "0.2", "--no-compiled"]) == 0

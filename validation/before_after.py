@@ -15,7 +15,8 @@ With ``--compiled`` the working tree is also timed with ``compiled=True`` (the C
 built once into a temporary cache before the timed runs), as a third column; its default
 runs (``compiled="auto"`` from 0.3 on) then find that build and run in C too, as they do on
 a machine where the mechanism has run before. Without it the cache stays empty and the
-default runs take the Python path, as on a fresh machine. ``--floor``
+default runs take the Python path, as on a machine without a C compiler (the jobs run
+with ``CMM_DAE_AUTO_BUILD=0``: "auto" builds nothing). ``--floor``
 (with ``--compiled``) adds the floor of any path through scikit-sundae's Python callbacks
 that takes the same steps: the compiled time plus, per callback the default path makes
 (residual, Jacobian and root-function calls, counted), scikit-sundae's own cost of calling
@@ -149,7 +150,10 @@ def job(pythonpath: Path, model: Path | str, t_end: float, rtol: float, repeat: 
         compiled: bool = False, cache: str = "", method: str = "ida") -> dict:
     """One subprocess timing ``repeat`` warm runs of the package at ``pythonpath``
     (``method="iterative"`` runs the iterative algorithm with dt = ``rtol``)."""
-    env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin", "CMM_DAE_CACHE": cache}
+    # (no build of "auto" before a first run or after long ones: the cache holds only
+    # what --compiled built)
+    env = {"PYTHONPATH": str(pythonpath), "PATH": "/usr/bin:/bin", "CMM_DAE_CACHE": cache,
+           "CMM_DAE_AUTO_BUILD": "0"}
     out = subprocess.run([sys.executable, "-c", JOB, str(model), str(t_end), str(rtol),
                           str(repeat), "1" if compiled else "0", method],
                          capture_output=True, text=True, env=env, check=True, cwd=pythonpath)

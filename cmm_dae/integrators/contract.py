@@ -41,7 +41,7 @@ class RunOptions:
     #: branch at a singular position: None (the branch of the motion) or (joint, +1 / -1)
     branch: tuple[str, int] | None = None
     #: IDA: run each segment in C (:mod:`cmm_dae.integrators.csegment`): True, False or
-    #: "auto" (where it is built already; :func:`~cmm_dae.integrators.csegment.choose`)
+    #: "auto" (where it is built already; :func:`~cmm_dae.integrators.cbuild.choose`)
     compiled: bool | str = False
     #: IDA's linear solver: "dense", "sparse" (SuperLU_MT on CasADi's pattern) or "auto"
     linsolver: str = "auto"

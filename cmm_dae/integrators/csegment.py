@@ -15,13 +15,9 @@ when it cannot, callers warn once and keep the Python path.
 
 from __future__ import annotations
 
-import atexit
 import ctypes
 import hashlib
 import subprocess
-import threading
-import warnings
-import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,16 +26,13 @@ import numpy as np
 import sksundae  # loads the SUNDIALS libraries into the process before the driver
 from sksundae._cy_ida import IDAMESSAGES
 
-from ..core.errors import CompileNotice
 from ..core.progress import Bar
 from ..equations import banded, compiled, kkt
-from ..equations.codegen import NotBuiltError, build_library, c_compiler, cache_dir, function_key
+from ..equations.codegen import build_library, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
 
-__all__ = ["AUTO_BUILD_AFTER", "CHUNK", "CompiledModel", "SegmentRun", "available",
-           "build_estimate", "build_later", "c_compiler", "choose", "clear", "driver",
-           "for_model"]
+__all__ = ["CHUNK", "CompiledModel", "SegmentRun", "available", "check_version", "driver"]
 
 #: cmm_seg_run's own return values besides IDA's flags
 SEG_MORE, SEG_STALLED = 100, 101
@@ -252,147 +245,3 @@ class CompiledModel:
             IDAMESSAGES.get(int(flag), f"IDA flag {flag}"),
             info[None, :].copy() if flag == 2 else None, int(stats[1]), int(stats[2]),
             int(stats[0]), interrupted or stalled, stalled)
-
-
-#: model -> {sparse: CompiledModel, None (its build failed), _MISSING (not built: "auto"
-#: looked) or _BUILDING (a background build runs)}, weak in the model
-_models: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_MISSING, _BUILDING = "missing", "building"
-_warned = _noticed = False
-_builds: list[threading.Thread] = []
-
-
-def clear() -> None:
-    """Forget the compiled segments loaded in this process (looked up in the cache again)."""
-    _join()
-    _models.clear()
-
-
-def _warn_once(message: str) -> None:
-    """Say why the compiled segment is not used, once per process."""
-    global _warned
-    if not _warned:
-        warnings.warn(message, stacklevel=5)
-        _warned = True
-
-
-def _unsupported(model: Model) -> str | None:
-    """Why ``model`` runs in Python whatever the machine has, or None."""
-    return ("load laws given as Python callables run in Python" if model.callables else
-            "friction from the reaction is solved in Python" if model.reacting else None)
-
-
-def for_model(model: Model, sparse: bool = False) -> CompiledModel | None:
-    """The compiled segment of ``model`` (built on first use, kept with the model), or None
-    with a warning (once per process) when it cannot be used: no working C compiler, no
-    SUNDIALS libraries from scikit-sundae, load laws given as Python callables, or
-    friction from the reaction (its event functions solve a nonlinear KKT system)."""
-    why = available() or _unsupported(model)
-    if why is not None:
-        _warn_once(f"compiled segment not used ({why}): running the Python path")
-        return None
-    per_model = _models.setdefault(model, {})
-    if not isinstance(per_model.get(sparse), CompiledModel):
-        if per_model.get(sparse) is _BUILDING:
-            _join()
-        try:
-            per_model[sparse] = CompiledModel(model, sparse)
-        except (OSError, subprocess.SubprocessError, RuntimeError) as e:
-            warnings.warn(f"compiled segment not used (building this model failed: {e}): "
-                          "running the Python path", stacklevel=4)
-            per_model[sparse] = None
-    return per_model[sparse]
-
-
-def choose(model: Model, sparse: bool, mode: bool | str) -> CompiledModel | None:
-    """The compiled segment a run of ``model`` uses, by its option ``compiled``: True
-    builds it where it can (:func:`for_model`), False never; ``"auto"`` (the default)
-    uses it where it is built already (in the cache, by an earlier run or process), never
-    builds it first: the Python path where it is not built, where the machine has no
-    compiler and for the mechanisms it does not cover, quietly (:func:`build_later` builds
-    it after a long run); with another scikit-sundae than the driver was written for,
-    with one warning."""
-    global _driver_error
-    if mode is True:
-        return for_model(model, sparse)
-    if mode is False or _unsupported(model) is not None or _driver_error is not None:
-        return None
-    if _driver is None:
-        try:  # another scikit-sundae: never loaded; said once, as with True
-            check_version()
-        except OSError as e:
-            _driver_error = str(e)
-            _warn_once(f"compiled segment not used ({e})")
-            return None
-    per_model = _models.setdefault(model, {})
-    got = per_model.get(sparse, _MISSING)
-    if got is _MISSING:
-        try:
-            got = per_model[sparse] = CompiledModel(model, sparse, build=False)
-        except NotBuiltError:
-            got = per_model[sparse] = _MISSING
-        except (OSError, subprocess.SubprocessError, RuntimeError):
-            got = per_model[sparse] = None  # (another scikit-sundae, a broken library)
-    return got if isinstance(got, CompiledModel) else None
-
-
-#: compiled="auto" builds a segment in the background once the runs of a model in Python
-#: in this process took this long (s) and twice the build's estimate (:func:`build_estimate`)
-#: together: a long run, or a sweep of short ones (A02 with 8 loops: a 2-s run in 0.1 s).
-AUTO_BUILD_AFTER = 2.0
-_spent: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> s in Python
-
-
-def build_estimate(model: Model) -> float:
-    """Seconds to build ``model``'s compiled segment from its CasADi instructions (gcc -O2:
-    residual and Jacobian 0.28-0.64 s for 1,500-3,500, 4.4 s for 13,900; post-processing's
-    library, where built, 0.75-2.9 s for 3,600-11,300)."""
-    u, outs = model.ida, compiled.instructions(model)
-    return 0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions()) + \
-        (0.2 + 2.5e-4 * outs if outs <= compiled.OUTPUTS_BUDGET else 0.0)
-
-
-def build_later(model: Model, sparse: bool, mode: bool | str, used: CompiledModel | None,
-                seconds: float) -> None:
-    """After a run of ``seconds`` (wall time) in Python under ``compiled="auto"``: build
-    the compiled segment in a background thread once the model's runs took long enough
-    together (:data:`AUTO_BUILD_AFTER`), so that the next runs of the mechanism use it;
-    said once per process (:class:`~cmm_dae.core.errors.CompileNotice`). The process
-    waits for the build at exit, so that the cache never keeps half a build."""
-    global _noticed
-    if mode != "auto" or used is not None or _unsupported(model) is not None \
-            or c_compiler() is None or _driver_error is not None:
-        return
-    per_model = _models.setdefault(model, {})
-    if per_model.get(sparse, _MISSING) is not _MISSING:
-        return  # built, building or failed
-    est, _spent[model] = build_estimate(model), _spent.get(model, 0.0) + seconds
-    if _spent[model] < max(AUTO_BUILD_AFTER, 2.0 * est):
-        return
-    per_model[sparse] = _BUILDING
-    if not _noticed:
-        warnings.warn(f"compiled=\"auto\": building the compiled segment of "
-                      f"{model.mech.name!r} in the background (about {est:.1f} s; cached "
-                      f"in {cache_dir()}); later runs of it use it (never: compiled=False, "
-                      "or --no-compiled)", CompileNotice, stacklevel=6)
-        _noticed = True
-    if not _builds:
-        atexit.register(_join)
-    thread = threading.Thread(target=_build, args=(model, sparse), daemon=True,
-                              name="cmm_dae compiled segment")
-    _builds.append(thread)
-    thread.start()
-
-
-def _build(model: Model, sparse: bool) -> None:
-    per_model = _models.setdefault(model, {})
-    try:
-        per_model[sparse] = CompiledModel(model, sparse)
-    except (OSError, subprocess.SubprocessError, RuntimeError):
-        per_model[sparse] = None  # a failed background build: the Python path, quietly
-
-
-def _join() -> None:
-    """Wait for the background builds (at exit, and before a build of the same model)."""
-    for thread in list(_builds):
-        thread.join()

@@ -26,7 +26,7 @@ from ..equations.kinematics import project_state, singular_ratio
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
-from . import csegment
+from . import cbuild
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
 from .ida_callbacks import IdaCallbacks
 from .ida_steps import (
@@ -58,7 +58,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         return ev.ZENO_DT  # events are located to round-off
 
     def after_run(self, seconds: float) -> None:
-        csegment.build_later(self.model, self.sparse, self.opts.compiled, self.c, seconds)
+        cbuild.build_later(self.model, self.sparse, self.opts.compiled, self.c, seconds)
 
     @staticmethod
     def gap_resolution(opts: RunOptions) -> tuple[float, float]:
@@ -83,8 +83,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.jac: Buffered | None = None
         self._jj: np.ndarray | None = None  # the Jacobian array the function writes into
         self.sparse = sparse_solver(model, opts.linsolver)
-        #: the compiled segment, or None for the Python path (csegment.choose)
-        self.c = csegment.choose(model, self.sparse, opts.compiled)
+        #: the compiled segment, or None for the Python path (cbuild.choose)
+        self.c = cbuild.choose(model, self.sparse, opts.compiled)
         self.ls_options: dict = {}
         if self.sparse:
             colind, row = u.jac_pattern.get_ccs()

@@ -152,8 +152,8 @@ def chain_row(n: int, name: str, run_peer, *, t_end: float, h: float, repeat: in
     cmm_dae at the cheapest of ``rtols`` reaching its error: ``loops``, ``h``,
     ``<name>_error`` (m), ``rtol`` (None where none did), ``cmm_dae_error`` (m), the best
     wall times ``<name>_s`` and ``cmm_dae_s`` (s), alternating, ``ratio``, cmm_dae's
-    over the peer's, and ``path``: "C" where its runs used the compiled segment (a cached
-    build, which ``compiled="auto"`` finds), else "Python"."""
+    over the peer's, and ``path``: "C" where its runs used the compiled segment (cached,
+    or built by ``compiled="auto"`` before its first run), else "Python"."""
     mech = iftomm.a02_four_bar(n)
     err_peer = error_a02(*run_peer(n, t_end, h), n)
 
@@ -209,6 +209,6 @@ def peers_table(rows: list[dict]) -> str:
               for r in rows]
     lines.append(f"{RATIO_NOTE}; first run: cmm_dae's run that builds the model, over "
                  "MuJoCo's; path: where cmm_dae's runs went, C (the compiled segment, "
-                 "built once per mechanism by a run with compiled=True and then found by "
-                 "the default) or Python")
+                 "cached or built by the default before a first run where that is short) "
+                 "or Python")
     return "\n".join(lines)
