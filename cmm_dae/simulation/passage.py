@@ -142,15 +142,13 @@ def _on_grid(model: Model, p: np.ndarray, ends: tuple, s: np.ndarray, act: np.nd
     return _log_gram(model, p, tx, hermite(*ends, tx[:, None])[0], act)
 
 
-def _refined_grid(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray, exact
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_on_grid` at the fractions of :data:`POINTS` parts of the interval, then of
-    :data:`POINTS` parts of the two about the lowest point: (fractions in increasing
-    order, the measure there). Next to a passage the measure has a logarithm's dip to
-    its instant, which the coarse point nearest it shows lowest, or its neighbour where
-    the instant lies halfway: either way within the refined span."""
-    s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
-    g = _on_grid(model, p, ends, s, act, exact)
+def _refined_grid(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray, exact,
+                  s: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_on_grid` at the fractions ``s`` of :data:`POINTS` parts of the interval
+    (``g`` there), then of :data:`POINTS` parts of the two about the lowest point:
+    (fractions in increasing order, the measure there). Next to a passage the measure has
+    a logarithm's dip to its instant, which the coarse point nearest it shows lowest, or
+    its neighbour where the instant lies halfway: either way within the refined span."""
     k = int(np.argmin(g))
     lo, hi = (s[k - 1] if k > 0 else 0.0), (s[k + 1] if k < s.size - 1 else 1.0)
     f = np.linspace(lo, hi, POINTS + 1)[1:-1]
@@ -227,10 +225,12 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 continue
             searched.add(a)
             ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
-            at = _ratio_at(model, p, ends)
-            sides.append((a, ends, at, *_refined_grid(model, p, ends, act, at)))
+            at, s = _ratio_at(model, p, ends), np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
+            sides.append((a, ends, at, s, _on_grid(model, p, ends, s, act, at)))
         for a, ends, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[4]))):
-            x, r_min = interval_instant(model, p, ends, act, at, s, grid)
+            x, r_min = interval_instant(  # (the coarse grid, refined where it is not enough)
+                model, p, ends, act, at, s, grid, lambda s, g, ends=ends, at=at:
+                _refined_grid(model, p, ends, act, at, s, g))
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant

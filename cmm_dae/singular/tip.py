@@ -20,6 +20,7 @@ minimum is there); else it searches the ratio's minimum as before.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -47,28 +48,34 @@ ITERATIONS = 2
 
 
 def interval_instant(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray,
-                     at: Callable[[float], float], s: np.ndarray, grid: np.ndarray
-                     ) -> tuple[float, float]:
+                     at: Callable[[float], float], s: np.ndarray, grid: np.ndarray,
+                     refine: Callable | None = None) -> tuple[float, float]:
     """:func:`~.instant.interval_minimum` (the smallest singular-value ratio ``at(x)`` on
     the samples' interpolant between two samples, ``ends``: t, q, v at each, and its
     fraction x of the interval, from a measure ``grid`` of it at the fractions ``s``),
     found on a banded mechanism by :func:`newton_tip` from the grid's lowest point and
     one exact ratio where the motion passes the singular position itself: with 32 loops
-    the search took six exact ratios of 2 ms each."""
+    the search took six exact ratios of 2 ms each. ``refine(s, grid)``: a finer grid,
+    asked for only where Newton's method from this one does not find the instant (and
+    for the search it falls back on)."""
     band = gram_band(model, act) if 0 < act.size <= model.nq else None
-    if band is not None:
+
+    def values_at(x: float) -> np.ndarray:
+        tx = float(ends[0] + x * (ends[3] - ends[0]))
+        return active_values_at(model, act, hermite(*ends, tx)[0], tx, p)
+
+    for _ in range(2 if band is not None else 0):
         k = int(np.argmin(grid))
         lo, hi = (s[k - 1] if k > 0 else 0.0), (s[k + 1] if k < s.size - 1 else 1.0)
-
-        def values_at(x: float) -> np.ndarray:
-            tx = float(ends[0] + x * (ends[3] - ends[0]))
-            return active_values_at(model, act, hermite(*ends, tx)[0], tx, p)
-
         x = newton_tip(values_at, band, model.nq, float(lo), float(hi), float(s[k]))
-        if x is not None:
-            r = at(x)
-            if r < TIP_RATIO:
-                return x, r
+        r = at(x) if x is not None else math.inf
+        if r < TIP_RATIO:
+            return x, r
+        if refine is None:
+            break
+        s, grid, refine = *refine(s, grid), None
+    if refine is not None:
+        s, grid = refine(s, grid)
     return interval_minimum(at, s, grid)
 
 
