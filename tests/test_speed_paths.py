@@ -356,3 +356,63 @@ def test_collapsed_rows_from_the_gram_eigenpairs_are_the_svds():
         assert np.max(np.abs(Uk @ Uk.T - got[1] @ got[1].T)) <= 1e-8
     # a threshold below GRAM_FROM: the SVD decides
     assert rank.collapsed_gram(J, 0.1 * rank.GRAM_FROM, float(s[0] ** 2)) is None
+
+
+def test_collapsed_rows_of_a_long_chain_by_block_inverse_iteration(monkeypatch):
+    """A02 with 32 loops (194 rows, from BLOCK_FROM on): at both singular instants the
+    rank drop (32) and the rows come from the Gram band's eigenvalues and a block inverse
+    iteration, without the dense eigensolver (made to fail here); the basis spans the
+    SVD's last 32 left singular vectors to 1e-8 and the labels are the SVD's."""
+    from cmm_dae.description import iftomm
+    from cmm_dae.equations import kinematics, rank
+    from cmm_dae.singular.instant import hermite
+
+    mech = iftomm.a02_four_bar(32)
+    model = cd.Model(mech)
+    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    p = model.params()
+    act = model.active_rows(p)
+    band = kinematics.gram_band(model, act)
+    assert band is not None and act.size >= rank.BLOCK_FROM and len(res.events) == 2
+
+    def no_dense(*args):
+        raise AssertionError("the dense eigensolver was called")
+
+    t, q, v = res.t, res.data["q"], res.data["v"]
+    for e in res.events:
+        a = int(np.searchsorted(t, e.t)) - 1
+        qs = hermite(t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1], e.t)[0]
+        J = model.constraints(qs, e.t, p).Phi_q[act]
+        U, s, _ = np.linalg.svd(J, full_matrices=False)
+        low = kinematics.banded.lower_blocks(
+            band, kinematics.active_values_at(model, act, qs, e.t, p)[:, None])
+        with monkeypatch.context() as mp:
+            mp.setattr(rank, "collapsed_gram", no_dense)
+            drop, basis = rank.collapsed_band(low, band.perm, J, 0.01)
+            assert kinematics.collapsed_rows(model, qs, e.t, p, 0.01) == (
+                drop, kinematics._row_labels(model, act, U, drop))
+        assert drop == rank.count_collapsed(s, 0.01) == 32
+        Uk = U[:, -32:]
+        assert np.max(np.abs(Uk @ Uk.T - basis @ basis.T)) <= 1e-8
+
+
+def test_collapsed_band_without_a_gap_is_the_dense_eigensolvers():
+    """Eigenvalues just under and just over the threshold (no clear gap): the block
+    iteration would converge slowly, so the dense eigensolver decides; with a gap of
+    1e-6 the block's basis is the eigenvectors' (here the unit vectors)."""
+    from cmm_dae.equations import rank
+
+    m, r0 = 120, 0.01
+    tau = (rank.COLLAPSE * r0) ** 2  # the largest eigenvalue is 1
+    for lam_k, gapped in ((1e-12 * tau, True), (0.9 * tau, False)):
+        lam = np.concatenate([[lam_k] * 5, [1.1 * tau], np.linspace(0.5, 1.0, m - 6)])
+        J = np.hstack([np.diag(np.sqrt(lam)), np.zeros((m, 1))])
+        low = lam[None, :].copy()  # a diagonal band: J J^T = diag(lam)
+        got = rank.collapsed_band(low, np.arange(m), J, r0)
+        dense = rank.collapsed_gram(J, r0, 1.0)
+        assert got[0] == dense[0] == 5
+        if gapped:
+            assert np.max(np.abs(got[1] @ got[1].T - np.diag([1.0] * 5 + [0.0] * (m - 5)))) \
+                <= 1e-12
+        else:
+            assert np.array_equal(got[1], dense[1])

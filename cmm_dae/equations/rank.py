@@ -10,11 +10,12 @@ singular-position logic of both integrators."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import eigh
+from scipy.linalg import eigh, eigvals_banded, qr
 from scipy.linalg import null_space as _null_space
+from scipy.linalg.lapack import dpbtrf, dpbtrs
 
-__all__ = ["COLLAPSE", "GRAM_FROM", "RANK_TOL", "collapsed", "collapsed_gram", "count_collapsed",
-           "dependent", "null_space", "rank", "ratio"]
+__all__ = ["COLLAPSE", "GRAM_FROM", "RANK_TOL", "collapsed", "collapsed_band", "collapsed_gram",
+           "count_collapsed", "dependent", "null_space", "rank", "ratio"]
 
 #: Relative size (to the largest) below which a singular value counts as zero: the
 #: numerical rank, dependent rows, the null space. Rows this close to dependent cannot be
@@ -90,3 +91,45 @@ def collapsed_gram(J: np.ndarray, r0: float, top: float) -> tuple[int, np.ndarra
         return None
     w, V = eigh(J @ J.T, subset_by_value=(-np.inf, (COLLAPSE * r0) ** 2 * top))
     return (w.size, V) if w.size else None
+
+
+#: :func:`collapsed_band` iterates a block where the last collapsed eigenvalue is at most
+#: this fraction of the next (each iteration gains that factor on the basis; at a singular
+#: instant round-off against 1e-6 of the largest or more), from this many rows on (below,
+#: the dense eigensolver is as fast), this many times.
+BLOCK_GAP, BLOCK_FROM, BLOCK_ITERATIONS = 1e-4, 100, 2
+
+
+def collapsed_band(low: np.ndarray, perm: np.ndarray, J: np.ndarray, r0: float
+                   ) -> tuple[int, np.ndarray] | None:
+    """:func:`collapsed_gram` of a long chain, from the band of its Gram matrix ``J J^T``:
+    ``low`` in LAPACK's lower band storage of J's rows reordered by ``perm`` (new row i is
+    row ``perm[i]``). The band's eigenvalues (one reduction, O(rows^2 band)) give the
+    largest and the count under the threshold; where the next eigenvalue is far above the
+    last counted one (:data:`BLOCK_GAP`), an orthonormal basis of their eigenvectors comes
+    from inverse iteration of a block of that many vectors on the band's Cholesky factor
+    (shifted by round-off), without a dense eigensolver (at A02's singular instants, 32
+    and 128 loops: 3.2 against 7.4 ms, 46 against 125 ms; the same counts and rows);
+    else :func:`collapsed_gram`."""
+    lam = eigvals_banded(low, lower=True)
+    top = float(lam[-1]) if lam.size else 0.0
+    k = int(np.sum(lam < (COLLAPSE * r0) ** 2 * top))
+    m = lam.size
+    if COLLAPSE * r0 < GRAM_FROM or not top > 0.0 or k == 0 or m < BLOCK_FROM \
+            or k == m or max(lam[k - 1], 0.0) > BLOCK_GAP * lam[k]:
+        return collapsed_gram(J, r0, top)
+    shifted = low.copy()
+    shifted[0] += 1e-14 * top  # (positive definite where J is singular)
+    c, info = dpbtrf(shifted, lower=1)
+    if info != 0:
+        return collapsed_gram(J, r0, top)
+    # a fixed start (the same on every machine), without a symmetry a chain could share
+    X = np.random.default_rng(0).standard_normal((m, k))
+    for _ in range(BLOCK_ITERATIONS):
+        X, info = dpbtrs(c, X, lower=1)
+        if info != 0:
+            return collapsed_gram(J, r0, top)
+        X = qr(X, mode="economic", overwrite_a=True, check_finite=False)[0]
+    basis = np.empty((m, k))
+    basis[perm] = X
+    return k, basis
