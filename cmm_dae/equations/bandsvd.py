@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.linalg import cython_lapack, lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["BandSVD", "ratio", "structure"]
+__all__ = ["GRAM_RATIO_FROM", "BandSVD", "gram_ratio", "ratio", "structure"]
 
 
 @dataclass(frozen=True)
@@ -84,10 +84,17 @@ def _lapack() -> tuple | None:
     return gbbrd, lasq1
 
 
-def ratio(st: BandSVD, values: np.ndarray) -> float | None:
+def ratio(st: BandSVD, values: np.ndarray, gram: np.ndarray | None = None) -> float | None:
     """Smallest over largest singular value of the matrix whose structural nonzeros are
     ``values`` (at ``st.rows``, ``st.cols``); 0 for a zero matrix; None where LAPACK's
-    routines are not available or fail (non-finite values): the dense SVD decides."""
+    routines are not available or fail (non-finite values): the dense SVD decides.
+    ``gram``: the matrix's Gram matrix ``J J^T`` in LAPACK's lower band storage, whose
+    extreme eigenvalues give the ratio first (:func:`gram_ratio`), kept where it is at
+    least :data:`GRAM_RATIO_FROM`."""
+    if gram is not None:
+        r = gram_ratio(gram)
+        if r is not None and r >= GRAM_RATIO_FROM:
+            return r
     routines = _lapack()
     if routines is None or not np.all(np.isfinite(values)):
         return None
@@ -143,3 +150,60 @@ def _extreme_ratio(d: np.ndarray, e: np.ndarray) -> float | None:
         return None
     top, low = float(big[1][0]), max(float(small[1][0]), 0.0)
     return low / top if top > 0.0 else 0.0
+
+
+#: :func:`gram_ratio` is taken for the ratio from this value on: the Gram matrix's
+#: eigenvalues are exact to round-off times the largest (with 128 loops, 770 rows, a bound
+#: of 1e-13 of it), so the ratio to 1e-13 / (2 ratio^2) of itself, 5e-6 here; below, the
+#: band's bidiagonal form decides (the ratio to round-off of the largest singular value).
+GRAM_RATIO_FROM = 1e-4
+
+
+@functools.cache
+def _sbtrd():
+    """LAPACK's ``dsbtrd`` (a symmetric band matrix to tridiagonal form) as a ctypes
+    function, or None where scipy does not export it."""
+    try:
+        caps = cython_lapack.__pyx_capi__
+        name = ctypes.pythonapi.PyCapsule_GetName
+        name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+        pointer = ctypes.pythonapi.PyCapsule_GetPointer
+        pointer.restype, pointer.argtypes = ctypes.c_void_p, [ctypes.py_object,
+                                                              ctypes.c_char_p]
+        cap = caps["dsbtrd"]
+        i, p = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
+        return ctypes.CFUNCTYPE(None, ctypes.c_char_p, ctypes.c_char_p, i, i, p, i, p, p, p,
+                                i, p, i)(pointer(cap, name(cap)))
+    except (AttributeError, KeyError, ValueError):
+        return None
+
+
+def gram_ratio(low: np.ndarray) -> float | None:
+    """The square root of the smallest over the largest eigenvalue of the symmetric
+    positive semidefinite band matrix in LAPACK's lower band storage ``low`` (bw + 1,
+    rows): a Gram matrix ``J J^T``'s, J's singular-value ratio. Reduced to tridiagonal
+    form (``dsbtrd``, O(rows^2 band) as the bidiagonal form of J, without J's columns
+    and with half the work: 7 against 22 ms with 128 loops), its extreme eigenvalues by
+    bisection. None where the routine is not available or fails."""
+    sbtrd = _sbtrd()
+    m = low.shape[1]
+    if sbtrd is None or m == 0 or not np.all(np.isfinite(low)):
+        return None
+    ab = np.array(low, order="F")  # (overwritten)
+    d, e, work, one = np.empty(m), np.zeros(max(m - 1, 1)), np.empty(m), np.zeros(1)
+    info = ctypes.c_int(0)
+
+    def ints(*xs: int) -> list:
+        return [ctypes.byref(ctypes.c_int(x)) for x in xs]
+
+    sbtrd(b"N", b"L", *ints(m, ab.shape[0] - 1), ab.ctypes.data, *ints(ab.shape[0]),
+          d.ctypes.data, e.ctypes.data, one.ctypes.data, *ints(1), work.ctypes.data,
+          ctypes.byref(info))
+    if info.value != 0:
+        return None
+    tol = 2.0 * np.finfo(float).tiny
+    top = lapack.dstebz(d, e[:m - 1], 2, 0.0, 0.0, m, m, tol, b"E")
+    low_ = lapack.dstebz(d, e[:m - 1], 2, 0.0, 0.0, 1, 1, tol, b"E")
+    if top[-1] != 0 or low_[-1] != 0 or not top[1][0] > 0.0:
+        return None
+    return float(np.sqrt(max(float(low_[1][0]), 0.0) / float(top[1][0])))

@@ -212,16 +212,16 @@ def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: 
 
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:
     """Smallest over largest singular value of the active constraint rows at q (0 when
-    they are dependent): :func:`dependent_rows`' measure alone, without the singular
-    vectors. Where the rows are many and banded once reordered (a long chain), from their
-    band (:mod:`cmm_dae.equations.bandsvd`: as accurate as the SVD, at O(rows^2 band)
-    against its O(rows^3)), else by the dense SVD."""
+    they are dependent), without the singular vectors. Where the rows are many and banded
+    once reordered (a long chain), from their band (:mod:`~.bandsvd`: as accurate as the
+    SVD at O(rows^2 band); from their Gram matrix's band where the ratio is not small),
+    else by the dense SVD."""
     act = model.active_rows(p)
     st = _svd_band(model, act) if 0 < act.size <= model.nq else None
-    if st is not None:
-        # Phi_q's nonzeros alone (the dense constraints' evaluation took 5 % of a run of
-        # A02 with 32 loops)
-        r = bandsvd.ratio(st, active_values_at(model, act, q, t, p))
+    if st is not None:  # (Phi_q's nonzeros alone: the dense Phi_q took 5 % of a run)
+        vals, band = active_values_at(model, act, q, t, p), gram_band(model, act)
+        low = banded.lower_blocks(band, vals[:, None]) if band is not None else None
+        r = bandsvd.ratio(st, vals, low)
         if r is not None:
             return r
     return rank.ratio(model.constraints(q, t, p).Phi_q[act])
