@@ -60,25 +60,30 @@ def structure(rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> BandSVD:
     return BandSVD(rows, cols, j * (kl + ku + 1) + ku + i - j, m, n, kl, ku)
 
 
+def _address(routine: str) -> int:
+    """The address of a LAPACK routine that ``scipy.linalg.cython_lapack`` exports
+    (KeyError, AttributeError or ValueError where it does not)."""
+    cap = cython_lapack.__pyx_capi__[routine]
+    name = ctypes.pythonapi.PyCapsule_GetName
+    name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+    pointer = ctypes.pythonapi.PyCapsule_GetPointer
+    pointer.restype, pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
+    return pointer(cap, name(cap))
+
+
+def _ints(*xs: int) -> list:
+    """Integer arguments for LAPACK, which takes every one by reference."""
+    return [ctypes.byref(ctypes.c_int(x)) for x in xs]
+
+
 @functools.cache
 def _lapack() -> tuple | None:
     """(dgbbrd, dlasq1) as ctypes functions, or None where scipy does not export them."""
     try:
-        caps = cython_lapack.__pyx_capi__
-        name = ctypes.pythonapi.PyCapsule_GetName
-        name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
-        pointer = ctypes.pythonapi.PyCapsule_GetPointer
-        pointer.restype, pointer.argtypes = ctypes.c_void_p, [ctypes.py_object,
-                                                              ctypes.c_char_p]
-
-        def address(routine: str) -> int:
-            cap = caps[routine]
-            return pointer(cap, name(cap))
-
         i, p = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
         gbbrd = ctypes.CFUNCTYPE(None, ctypes.c_char_p, i, i, i, i, i, p, i, p, p, p, i, p, i,
-                                 p, i, p, i)(address("dgbbrd"))
-        lasq1 = ctypes.CFUNCTYPE(None, i, p, p, p, i)(address("dlasq1"))
+                                 p, i, p, i)(_address("dgbbrd"))
+        lasq1 = ctypes.CFUNCTYPE(None, i, p, p, p, i)(_address("dlasq1"))
     except (AttributeError, KeyError, ValueError):
         return None
     return gbbrd, lasq1
@@ -111,17 +116,14 @@ def ratio(st: BandSVD, values: np.ndarray, gram: np.ndarray | None = None) -> fl
     one = np.zeros(1)  # Q, P^T and C are not formed
     info = ctypes.c_int(0)
 
-    def ints(*xs: int) -> list:  # LAPACK takes every integer by reference
-        return [ctypes.byref(ctypes.c_int(x)) for x in xs]
-
-    gbbrd(b"N", *ints(m, n, 0, kl, ku), ab.ctypes.data, *ints(kl + ku + 1), d.ctypes.data,
-          e.ctypes.data, one.ctypes.data, *ints(1), one.ctypes.data, *ints(1),
-          one.ctypes.data, *ints(1), work.ctypes.data, ctypes.byref(info))
+    gbbrd(b"N", *_ints(m, n, 0, kl, ku), ab.ctypes.data, *_ints(kl + ku + 1), d.ctypes.data,
+          e.ctypes.data, one.ctypes.data, *_ints(1), one.ctypes.data, *_ints(1),
+          one.ctypes.data, *_ints(1), work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
     if k >= BISECT_FROM:
         return _extreme_ratio(d, e[:k - 1])
-    lasq1(*ints(k), d.ctypes.data, e.ctypes.data, work.ctypes.data, ctypes.byref(info))
+    lasq1(*_ints(k), d.ctypes.data, e.ctypes.data, work.ctypes.data, ctypes.byref(info))
     if info.value != 0:
         return None
     # dlasq1 leaves the singular values in decreasing order
@@ -164,16 +166,9 @@ def _sbtrd():
     """LAPACK's ``dsbtrd`` (a symmetric band matrix to tridiagonal form) as a ctypes
     function, or None where scipy does not export it."""
     try:
-        caps = cython_lapack.__pyx_capi__
-        name = ctypes.pythonapi.PyCapsule_GetName
-        name.restype, name.argtypes = ctypes.c_char_p, [ctypes.py_object]
-        pointer = ctypes.pythonapi.PyCapsule_GetPointer
-        pointer.restype, pointer.argtypes = ctypes.c_void_p, [ctypes.py_object,
-                                                              ctypes.c_char_p]
-        cap = caps["dsbtrd"]
         i, p = ctypes.POINTER(ctypes.c_int), ctypes.c_void_p
         return ctypes.CFUNCTYPE(None, ctypes.c_char_p, ctypes.c_char_p, i, i, p, i, p, p, p,
-                                i, p, i)(pointer(cap, name(cap)))
+                                i, p, i)(_address("dsbtrd"))
     except (AttributeError, KeyError, ValueError):
         return None
 
@@ -193,11 +188,8 @@ def gram_ratio(low: np.ndarray) -> float | None:
     d, e, work, one = np.empty(m), np.zeros(max(m - 1, 1)), np.empty(m), np.zeros(1)
     info = ctypes.c_int(0)
 
-    def ints(*xs: int) -> list:
-        return [ctypes.byref(ctypes.c_int(x)) for x in xs]
-
-    sbtrd(b"N", b"L", *ints(m, ab.shape[0] - 1), ab.ctypes.data, *ints(ab.shape[0]),
-          d.ctypes.data, e.ctypes.data, one.ctypes.data, *ints(1), work.ctypes.data,
+    sbtrd(b"N", b"L", *_ints(m, ab.shape[0] - 1), ab.ctypes.data, *_ints(ab.shape[0]),
+          d.ctypes.data, e.ctypes.data, one.ctypes.data, *_ints(1), work.ctypes.data,
           ctypes.byref(info))
     if info.value != 0:
         return None
