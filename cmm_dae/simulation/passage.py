@@ -22,7 +22,7 @@ from scipy.sparse.linalg import splu
 from ..equations.kinematics import gram_band, gram_function, log_gram, singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
-from ..singular.instant import hermite
+from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant
 from .passage_start import START_RATIO, predicted_start, start_before
 
@@ -149,8 +149,7 @@ def _refined_grid(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray, exa
     (fractions in increasing order, the measure there). Next to a passage the measure has
     a logarithm's dip to its instant, which the coarse point nearest it shows lowest, or
     its neighbour where the instant lies halfway: either way within the refined span."""
-    k = int(np.argmin(g))
-    lo, hi = (s[k - 1] if k > 0 else 0.0), (s[k + 1] if k < s.size - 1 else 1.0)
+    k, lo, hi = grid_bracket(s, g)
     f = np.linspace(lo, hi, POINTS + 1)[1:-1]
     f = f[np.abs(f - s[k]) > 1e-3 / POINTS]  # (its middle is the coarse point)
     x, y = np.concatenate([s, f]), np.concatenate([g, _on_grid(model, p, ends, f, act, exact)])

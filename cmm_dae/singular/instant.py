@@ -11,8 +11,8 @@ from scipy.optimize import brentq, minimize_scalar
 
 from ..equations.model import Model
 
-__all__ = ["hermite", "interval_minimum", "null_vectors", "parabola_minimum",
-           "singular_instant"]
+__all__ = ["grid_bracket", "hermite", "interval_minimum", "null_vectors",
+           "parabola_minimum", "singular_instant"]
 
 
 def hermite(t0: float, q0: np.ndarray, v0: np.ndarray, t1: float, q1: np.ndarray,
@@ -96,19 +96,26 @@ def parabola_minimum(f, pts: dict[float, float], lo: float, hi: float, xatol: fl
     return None
 
 
+def grid_bracket(s: np.ndarray, grid: np.ndarray) -> tuple[int, float, float]:
+    """The lowest point of a measure ``grid`` at the increasing fractions ``s`` of an
+    interval (strictly inside it), and the fractions of its neighbours, the interval's
+    ends where it has none: (index, lower, upper)."""
+    k = int(np.argmin(grid))
+    return (k, float(s[k - 1]) if k > 0 else 0.0,
+            float(s[k + 1]) if k < s.size - 1 else 1.0)
+
+
 def interval_minimum(at, s: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
     """The smallest singular-value ratio ``at(x)`` on the samples' interpolant between two
     samples and where it lies (fraction x of the interval), from a measure ``grid`` of it
     at the increasing fractions ``s`` whose smallest value lies where the ratio's does
     (:mod:`cmm_dae.simulation.passage`)."""
-    k = int(np.argmin(grid))
+    k, lo_s, hi_s = grid_bracket(s, grid)
     # the ratio dips in a V to zero: the grid may step over its tip, a search between the
     # grid's neighbours finds it. On the ratio's square, a parabola there (and smooth where
     # it stays clear of zero), successive parabolas through the three best points converge
     # in 4-6 ratios (A02 with 8 and 32 loops), Brent's bounded search took 9-10 with the
     # grid point's; Brent where the parabolas do not close in
-    lo_s = s[k - 1] if k > 0 else 0.0
-    hi_s = s[k + 1] if k < s.size - 1 else 1.0
     def square(x: float) -> float:
         return at(float(x)) ** 2
 

@@ -31,7 +31,7 @@ from scipy.linalg.lapack import dpbtrf, dpbtrs
 from ..equations import banded
 from ..equations.kinematics import active_values_at, gram_band
 from ..equations.model import Model
-from .instant import hermite, interval_minimum
+from .instant import grid_bracket, hermite, interval_minimum
 
 __all__ = ["TIP_RATIO", "interval_instant", "largest_singular", "newton_tip"]
 
@@ -73,9 +73,8 @@ def interval_instant(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray,
         return active_values_at(model, act, hermite(*ends, tx)[0], tx, p)
 
     for _ in range(2 if band is not None else 0):
-        k = int(np.argmin(grid))
-        lo, hi = (s[k - 1] if k > 0 else 0.0), (s[k + 1] if k < s.size - 1 else 1.0)
-        got = newton_tip(values_at, band, model.nq, float(lo), float(hi), float(s[k]))
+        k, lo, hi = grid_bracket(s, grid)
+        got = newton_tip(values_at, band, model.nq, lo, hi, float(s[k]))
         if got is not None:
             x, sigma = got  # (an upper bound on the ratio, then the ratio where need be)
             big = largest_singular(values_at(x), band, model.nq)
