@@ -16,12 +16,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg.lapack import dgbsv, dpbsv
+from scipy.linalg.lapack import dgbsv, dpbsv, dpbtrf
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 __all__ = ["BANDED_FROM", "BAND_SHARE", "BandedSchur", "IDA_BAND_SHARE", "banded_solve",
            "batch_from_nonzeros", "for_model", "full_band", "ida_order", "kkt_nz_function",
-           "lower_blocks", "structure"]
+           "lower_blocks", "shifted_cholesky", "structure"]
 
 
 #: The banded path is taken from this many constraint rows on, when the band is narrow
@@ -98,6 +98,17 @@ def lower_blocks(st: BandedSchur, vals: np.ndarray, scale: np.ndarray | None = N
     n = vals.shape[1]
     low = st.to_lower @ prod  # ((bw + 1) m, states): summed into S's entries
     return np.ascontiguousarray(low.T).reshape(n * st.m, st.bw + 1).T
+
+
+def shifted_cholesky(low: np.ndarray, shift: float) -> np.ndarray | None:
+    """The banded Cholesky factor (LAPACK ``dpbtrf``, lower band storage) of the symmetric
+    band matrix whose lower band storage is ``low`` (kept) plus ``shift`` on its diagonal:
+    for inverse iteration on a Gram matrix ``J J^T``, positive definite with a shift of
+    round-off also where J is singular; None where it is not positive definite."""
+    shifted = low.copy()
+    shifted[0] += shift
+    c, info = dpbtrf(shifted, lower=1)
+    return c if info == 0 else None
 
 
 def full_band(low: np.ndarray, bw: int) -> np.ndarray:

@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import eigh, eigvals_banded, qr
 from scipy.linalg import null_space as _null_space
-from scipy.linalg.lapack import dpbtrf, dpbtrs
+from scipy.linalg.lapack import dpbtrs
+
+from . import banded
 
 __all__ = ["COLLAPSE", "GRAM_FROM", "RANK_TOL", "collapsed", "collapsed_band", "collapsed_gram",
            "count_collapsed", "dependent", "null_space", "rank", "ratio"]
@@ -118,10 +120,8 @@ def collapsed_band(low: np.ndarray, perm: np.ndarray, J: np.ndarray, r0: float
     if COLLAPSE * r0 < GRAM_FROM or not top > 0.0 or k == 0 or m < BLOCK_FROM \
             or k == m or max(lam[k - 1], 0.0) > BLOCK_GAP * lam[k]:
         return collapsed_gram(J, r0, top)
-    shifted = low.copy()
-    shifted[0] += 1e-14 * top  # (positive definite where J is singular)
-    c, info = dpbtrf(shifted, lower=1)
-    if info != 0:
+    c = banded.shifted_cholesky(low, 1e-14 * top)  # (round-off: J may be singular)
+    if c is None:
         return collapsed_gram(J, r0, top)
     # a fixed start (the same on every machine), without a symmetry a chain could share
     X = np.random.default_rng(0).standard_normal((m, k))

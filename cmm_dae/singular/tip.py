@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.linalg.lapack import dpbtrf, dpbtrs
+from scipy.linalg.lapack import dpbtrs
 
 from ..equations import banded
 from ..equations.kinematics import active_values_at, gram_band
@@ -120,8 +120,7 @@ def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchu
         w = _left_vector(vals, band)
         if w is None:
             return None
-        rows, cols = band.rows, band.cols
-        u = np.bincount(cols, weights=vals * w[rows], minlength=nq)
+        u = _jt(vals, band, w, nq)
         norm = float(np.linalg.norm(u))  # the smallest singular value at x
         if not norm < best[0]:
             # at the instant the value is round-off (or the least of a near miss), the
@@ -130,7 +129,7 @@ def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchu
         best = (norm, x)
         if norm == 0.0:
             return x, 0.0  # exactly singular here
-        weights = w[rows] * (u[cols] / norm)  # w . J n = values . weights
+        weights = w[band.rows] * (u[band.cols] / norm)  # w . J n = values . weights
         h = DIFF * (hi - lo)
         slope = float((values_at(x + h) - values_at(x - h)) @ weights) / (2.0 * h)
         if not np.isfinite(slope) or slope == 0.0:
@@ -145,16 +144,21 @@ def largest_singular(vals: np.ndarray, band: banded.BandedSchur, nq: int) -> flo
     """A lower bound on the largest singular value of J (structural nonzeros ``vals`` at
     ``band.rows``, ``band.cols``; ``nq`` columns): ``|J^T x|`` for the unit x that
     :data:`POWER` power iterations on ``J J^T`` reach from a fixed start."""
-    rows, cols = band.rows, band.cols
     x = 1.0 + 0.5 * np.sin(np.arange(band.m))
     for _ in range(POWER):
-        x = np.bincount(rows, weights=vals * np.bincount(
-            cols, weights=vals * x[rows], minlength=nq)[cols], minlength=band.m)
+        x = np.bincount(band.rows, weights=vals * _jt(vals, band, x, nq)[band.cols],
+                        minlength=band.m)  # J J^T x
         size = float(np.linalg.norm(x))
         if not size > 0.0:
             return 0.0
         x /= size
-    return float(np.linalg.norm(np.bincount(cols, weights=vals * x[rows], minlength=nq)))
+    return float(np.linalg.norm(_jt(vals, band, x, nq)))
+
+
+def _jt(vals: np.ndarray, band: banded.BandedSchur, x: np.ndarray, nq: int) -> np.ndarray:
+    """``J^T x`` for J with structural nonzeros ``vals`` (at ``band.rows``,
+    ``band.cols``) and ``nq`` columns."""
+    return np.bincount(band.cols, weights=vals * x[band.rows], minlength=nq)
 
 
 def _left_vector(vals: np.ndarray, band: banded.BandedSchur) -> np.ndarray | None:
@@ -163,9 +167,8 @@ def _left_vector(vals: np.ndarray, band: banded.BandedSchur) -> np.ndarray | Non
     Gram matrix shifted by round-off times its largest diagonal entry (positive definite
     also where J is singular); None where it cannot be factored."""
     low = banded.lower_blocks(band, vals[:, None])
-    low[0] += 1e-14 * float(np.max(low[0]))
-    c, info = dpbtrf(low, lower=1)
-    if info != 0:
+    c = banded.shifted_cholesky(low, 1e-14 * float(np.max(low[0])))
+    if c is None:
         return None
     # (a fixed start without symmetry: a chain's identical loops give symmetric vectors)
     y = 1.0 + 0.5 * np.sin(np.arange(band.m))
