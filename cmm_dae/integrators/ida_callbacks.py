@@ -130,6 +130,16 @@ class IdaCallbacks:
         return natural_step(y0[:nz], yp0[nz:2 * nz], self.rtol / self.tol_scale,
                             self.atol[:nz] / self.tol_scale, span)
 
+    @property
+    def linear_solver(self) -> str:
+        """The linear solver IDA's segments use: "dense", "sparse" (SuperLU_MT) or "band"
+        (the compiled segment's band LU, under ``linsolver="auto"`` where the Jacobian
+        reorders into a narrow band: :attr:`~.csegment.CompiledModel.band`)."""
+        if not self.sparse:
+            return "dense"
+        band = self.c is not None and self.c.band is not None
+        return "band" if band and self.opts.linsolver == "auto" else "sparse"
+
     def _solve_compiled(self, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                         first_step: float) -> csegment.SegmentRun:
         """The segment in C: the same IDA options, residual, Jacobian and event functions
@@ -139,7 +149,7 @@ class IdaCallbacks:
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress,
-                       band=self.opts.linsolver == "auto")
+                       band=self.linear_solver == "band")
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted
         return r

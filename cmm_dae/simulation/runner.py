@@ -308,11 +308,8 @@ def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], sta
                               else None)
     # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
     # falls back to the Python path where it cannot be built)
-    c = getattr(integ, "c", None)  # (band: the compiled segment's, see csegment.run)
-    res.meta["linsolver"] = None if not hasattr(integ, "sparse") else "dense" \
-        if not integ.sparse else "band" if c is not None and c.band is not None \
-        and opts.linsolver == "auto" else "sparse"
-    res.meta["compiled"] = c is not None
+    res.meta["linsolver"] = getattr(integ, "linear_solver", None)
+    res.meta["compiled"] = getattr(integ, "c", None) is not None
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included
     if "lam" not in res.data and res.t.size:  # post-processing ran out of memory: the
         # states are kept (build_result), the run fails with them
