@@ -145,13 +145,19 @@ def _extreme_ratio(d: np.ndarray, e: np.ndarray) -> float | None:
     k = d.size
     off = np.empty(2 * k - 1)
     off[0::2], off[1::2] = d, e
-    zero, tol = np.zeros(2 * k), 2.0 * np.finfo(float).tiny
-    big = lapack.dstebz(zero, off, 2, 0.0, 0.0, 2 * k, 2 * k, tol, b"E")
-    small = lapack.dstebz(zero, off, 2, 0.0, 0.0, k + 1, k + 1, tol, b"E")
-    if big[-1] != 0 or small[-1] != 0:
+    zero = np.zeros(2 * k)
+    top, low = _eigenvalue(zero, off, 2 * k), _eigenvalue(zero, off, k + 1)
+    if top is None or low is None:
         return None
-    top, low = float(big[1][0]), max(float(small[1][0]), 0.0)
-    return low / top if top > 0.0 else 0.0
+    return max(low, 0.0) / top if top > 0.0 else 0.0
+
+
+def _eigenvalue(d: np.ndarray, e: np.ndarray, i: int) -> float | None:
+    """The i-th smallest eigenvalue (from 1) of the symmetric tridiagonal matrix with
+    diagonal ``d`` and off-diagonal ``e``, by LAPACK's bisection (``dstebz``) to full
+    relative accuracy; None where it fails."""
+    got = lapack.dstebz(d, e, 2, 0.0, 0.0, i, i, 2.0 * np.finfo(float).tiny, b"E")
+    return float(got[1][0]) if got[-1] == 0 else None
 
 
 #: :func:`gram_ratio` is taken for the ratio from this value on: the Gram matrix's
@@ -193,9 +199,7 @@ def gram_ratio(low: np.ndarray) -> float | None:
           ctypes.byref(info))
     if info.value != 0:
         return None
-    tol = 2.0 * np.finfo(float).tiny
-    top = lapack.dstebz(d, e[:m - 1], 2, 0.0, 0.0, m, m, tol, b"E")
-    low_ = lapack.dstebz(d, e[:m - 1], 2, 0.0, 0.0, 1, 1, tol, b"E")
-    if top[-1] != 0 or low_[-1] != 0 or not top[1][0] > 0.0:
+    top, low = _eigenvalue(d, e[:m - 1], m), _eigenvalue(d, e[:m - 1], 1)
+    if top is None or low is None or not top > 0.0:
         return None
-    return float(np.sqrt(max(float(low_[1][0]), 0.0) / float(top[1][0])))
+    return float(np.sqrt(max(low, 0.0) / top))
