@@ -1,8 +1,9 @@
 """Which compiled segment a run uses, and when it is built: ``compiled=True`` builds it
-before the run, ``"auto"`` (the default) uses it where it is in the cache and builds it
-in the background once a mechanism's runs in Python took long enough together, ``False``
-never; the registry of the segments loaded in this process (:mod:`.csegment` is the
-segment itself)."""
+before the run; ``"auto"`` (the default) uses it where it is in the cache, builds it
+before the run where the build is short (:data:`AUTO_BUILD_NOW`), and otherwise builds
+it in the background once a mechanism's runs in Python took long enough together
+(:data:`AUTO_BUILD_AFTER`); ``False`` never. Also the registry of the segments loaded
+in this process (:mod:`.csegment` is the segment itself)."""
 
 from __future__ import annotations
 
