@@ -184,8 +184,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         Find the sample a crossing of each would start from (:func:`start_before`), as
         a branch rule needs; without, a passage's ``start`` is -1 and its
         ``start_ratio`` the ratio a crossing starts from, :data:`START_RATIO`, or the
-        largest ratio known at a sample before it where that is lower (a mechanism whose
-        ratio is low everywhere): the threshold its rank drop is counted against. The
+        largest ratio known at a sample before it, the segment's start among them, where
+        that is lower (a mechanism whose ratio is low everywhere): the threshold its rank
+        drop is counted against. The
         walk back took 4 of 27 exact ratios with 8 and 32 loops, 11 of 34 with 128.
 
     Returns
@@ -245,7 +246,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 j = start_before(a, r, predicted_start(a, logdet, ratios))
                 found.append(Passage(j, a, t_s, r_min, r(j)))
             else:
-                known = max((ratios[i] for i in ratios if i <= a), default=START_RATIO)
+                known = max((ratios[i] for i in ratios if i <= a), default=0.0)
+                if known < START_RATIO:  # (the segment's start: low everywhere?)
+                    known = max(known, r(0))
                 found.append(Passage(-1, a, t_s, r_min, min(START_RATIO, known)))
             if first:
                 return found
@@ -270,18 +273,40 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
     candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
     # an end: where the ratio falls towards it and, on the two samples beside it extended
-    # linearly, reaches zero within an interval of it
+    # linearly, reaches zero within an interval of it; the determinant asked first
     for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
         if b < 0 or b >= n:  # two samples: the line through both
             a, b = end, a
+        reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
+        if not _end_may_dip(d, t, end, a, b, reach):
+            continue
         if r(end) > r(a):  # rising towards the end (the third ratio not needed)
             continue
         slope = (r(b) - r(a)) / (t[b] - t[a])
         zero = t[a] - r(a) / slope if slope != 0.0 else math.inf
-        reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
         if abs(zero - t[end]) <= reach:
             candidates.append(end)
     return candidates, d
+
+
+def _end_may_dip(d: np.ndarray, t: np.ndarray, end: int, a: int, b: int,
+                 reach: float) -> bool:
+    """Whether the segment's end sample ``end`` may be next to a passage, asked of the log
+    determinant ``d`` before the exact ratios are (they took 5 of a run's 11 on A02,
+    whose ends are far from one): as the interior's candidates, where d falls towards the
+    end and ``exp(d / 2)``, the smallest singular value where the others change little,
+    on the line through samples ``a`` and ``b`` reaches zero within twice ``reach`` (s)
+    of it. Where k singular values collapse together ``exp(d / 2)`` falls as their k-th
+    power, whose line reaches zero sooner: the question errs towards asking the ratios."""
+    if not d[end] < d[a]:  # level or rising towards the end (or a singular neighbour)
+        return bool(d[end] == -np.inf)
+    if d[end] == -np.inf:
+        return True
+    # relative to the end's (1 there), capped: no overflow where the end's is tiny
+    ra, rb = (math.exp(min(0.5 * (d[x] - d[end]), 700.0)) for x in (a, b))
+    slope = (rb - ra) / (t[b] - t[a])
+    zero = t[a] - ra / slope if slope != 0.0 else math.inf
+    return abs(zero - t[end]) <= 2.0 * reach
 
 
 def _dips(candidates: list[int], n: int, r) -> set[int]:
