@@ -8,7 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cmm_dae.simulation.passage_start import START_RATIO, predicted_start, start_before
+from cmm_dae.simulation.passage_start import (
+    START_RATIO,
+    end_may_dip,
+    predicted_start,
+    start_before,
+)
 
 
 def _walk(a: int, ratios: np.ndarray) -> int:
@@ -152,27 +157,25 @@ def _logdet(t: np.ndarray, t_star: float, k: int) -> np.ndarray:
 
 @pytest.mark.parametrize("k", [1, 10])
 def test_an_end_next_to_a_passage_is_asked_of_the_ratios(k):
-    from cmm_dae.simulation.passage import _end_may_dip
     t = np.linspace(0.0, 0.1, 11)  # intervals of 0.01 s
     # beyond the last sample by half an interval, inside the last interval next to the
     # end, beyond the first sample, exactly at the end: each end may dip
     for t_star, end, a, b in ((0.105, 10, 9, 8), (0.097, 10, 9, 8), (-0.004, 0, 1, 2),
                               (0.1, 10, 9, 8)):
-        assert _end_may_dip(_logdet(t, t_star, k), t, end, a, b, 0.01), (t_star, end)
+        assert end_may_dip(_logdet(t, t_star, k), t, end, a, b, 0.01), (t_star, end)
     # far beyond an end (five intervals; fifty where ten collapse, whose determinant's
     # line errs towards asking), or rising towards it: the ratios are not asked
     far = 0.05 if k == 1 else 0.5
     for t_star, end, a, b in ((0.1 + far, 10, 9, 8), (-far, 0, 1, 2), (0.095, 0, 1, 2)):
-        assert not _end_may_dip(_logdet(t, t_star, k), t, end, a, b, 0.01), (t_star, end)
+        assert not end_may_dip(_logdet(t, t_star, k), t, end, a, b, 0.01), (t_star, end)
 
 
 def test_a_level_determinant_asks_no_ratio_at_the_ends():
-    from cmm_dae.simulation.passage import _end_may_dip
     t = np.linspace(0.0, 2.0, 201)
     rng = np.random.default_rng(3)
     d = -7.7 + 1e-12 * rng.standard_normal(t.size)  # level to round-off (A02's ends)
-    assert not _end_may_dip(d, t, 0, 1, 2, 0.01)
-    assert not _end_may_dip(d, t, 200, 199, 198, 0.01)
+    assert not end_may_dip(d, t, 0, 1, 2, 0.01)
+    assert not end_may_dip(d, t, 200, 199, 198, 0.01)
     d[0] = -np.inf  # a sample singular to round-off is always asked
-    assert _end_may_dip(d, t, 0, 1, 2, 0.01)
-    assert not _end_may_dip(d, t, 1, 0, 2, 0.01)  # (its neighbour: rising from it)
+    assert end_may_dip(d, t, 0, 1, 2, 0.01)
+    assert not end_may_dip(d, t, 1, 0, 2, 0.01)  # (its neighbour: rising from it)

@@ -24,7 +24,7 @@ from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant
-from .passage_start import START_RATIO, predicted_start, start_before
+from .passage_start import START_RATIO, end_may_dip, predicted_start, start_before
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
 WATCH_RATIO = 0.3
@@ -278,7 +278,7 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
         if b < 0 or b >= n:  # two samples: the line through both
             a, b = end, a
         reach = max(abs(t[a] - t[b]), abs(t[end] - t[a]))
-        if not _end_may_dip(d, t, end, a, b, reach):
+        if not end_may_dip(d, t, end, a, b, reach):
             continue
         if r(end) > r(a):  # rising towards the end (the third ratio not needed)
             continue
@@ -287,26 +287,6 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
         if abs(zero - t[end]) <= reach:
             candidates.append(end)
     return candidates, d
-
-
-def _end_may_dip(d: np.ndarray, t: np.ndarray, end: int, a: int, b: int,
-                 reach: float) -> bool:
-    """Whether the segment's end sample ``end`` may be next to a passage, asked of the log
-    determinant ``d`` before the exact ratios are (they took 5 of a run's 11 on A02,
-    whose ends are far from one): as the interior's candidates, where d falls towards the
-    end and ``exp(d / 2)``, the smallest singular value where the others change little,
-    on the line through samples ``a`` and ``b`` reaches zero within twice ``reach`` (s)
-    of it. Where k singular values collapse together ``exp(d / 2)`` falls as their k-th
-    power, whose line reaches zero sooner: the question errs towards asking the ratios."""
-    if not d[end] < d[a]:  # level or rising towards the end (or a singular neighbour)
-        return bool(d[end] == -np.inf)
-    if d[end] == -np.inf:
-        return True
-    # relative to the end's (1 there), capped: no overflow where the end's is tiny
-    ra, rb = (math.exp(min(0.5 * (d[x] - d[end]), 700.0)) for x in (a, b))
-    slope = (rb - ra) / (t[b] - t[a])
-    zero = t[a] - ra / slope if slope != 0.0 else math.inf
-    return abs(zero - t[end]) <= 2.0 * reach
 
 
 def _dips(candidates: list[int], n: int, r) -> set[int]:

@@ -1,5 +1,6 @@
 """Where the crossing of a singular position IDA stepped over starts: the last sample before
-it whose singular-value ratio is at least :data:`START_RATIO` (:mod:`.passage`)."""
+it whose singular-value ratio is at least :data:`START_RATIO` (:mod:`.passage`); and
+whether a segment's end sample may be next to one, asked of the log determinant."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import math
 
 import numpy as np
 
-__all__ = ["START_RATIO", "predicted_start", "start_before"]
+__all__ = ["START_RATIO", "end_may_dip", "predicted_start", "start_before"]
 
 #: The crossing starts from the last sample before the passage whose ratio is at least
 #: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
@@ -69,3 +70,23 @@ def predicted_start(a: int, logdet: np.ndarray | None, ratios: dict[int, float]
     pred = math.log(ratios[i1]) + kappa * (logdet[:a + 1] - logdet[i1])
     reach = np.flatnonzero(pred >= math.log(START_RATIO))
     return int(reach[-1]) if reach.size else None
+
+
+def end_may_dip(d: np.ndarray, t: np.ndarray, end: int, a: int, b: int,
+                reach: float) -> bool:
+    """Whether the segment's end sample ``end`` may be next to a passage, asked of the log
+    determinant ``d`` before the exact ratios are (they took 5 of a run's 11 on A02,
+    whose ends are far from one): as the interior's candidates, where d falls towards the
+    end and ``exp(d / 2)``, the smallest singular value where the others change little,
+    on the line through samples ``a`` and ``b`` reaches zero within twice ``reach`` (s)
+    of it. Where k singular values collapse together ``exp(d / 2)`` falls as their k-th
+    power, whose line reaches zero sooner: the question errs towards asking the ratios."""
+    if not d[end] < d[a]:  # level or rising towards the end (or a singular neighbour)
+        return bool(d[end] == -np.inf)
+    if d[end] == -np.inf:
+        return True
+    # relative to the end's (1 there), capped: no overflow where the end's is tiny
+    ra, rb = (math.exp(min(0.5 * (d[x] - d[end]), 700.0)) for x in (a, b))
+    slope = (rb - ra) / (t[b] - t[a])
+    zero = t[a] - ra / slope if slope != 0.0 else math.inf
+    return abs(zero - t[end]) <= 2.0 * reach
