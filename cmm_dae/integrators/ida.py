@@ -267,13 +267,21 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         KKT solve; (first step, q, v, y0, yp0, the segment's stop time)."""
         model, opts, hs, u = self.model, self.opts, self.hs, self.u
         self.p[:] = hs.p
-        if not self._scaled:  # the run's first segment: its force scale
-            self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v), True
-            self._lambda_atol()
         first_step, self.first_step = self.first_step, 0.0
-        self.triggers = ev.event_list(model, hs.locked)
-        self.push_idx = np.array([i for i, tr in enumerate(self.triggers)
-                                  if tr.kind in ev.LOCK_FORCES], dtype=int)
+        self.n_steps, self.in_place, self.t_last = 0, 0, -math.inf
+        self.interrupted = self.stalled = self.crawled = False
+        self.step_budget = opts.max_steps - self.stats.steps
+        # A state taken from IDA's interpolant at a root satisfies the constraints only to
+        # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
+        q, v = project_state(model, q, v, t0, self.p)
+        a, lam, Phi_q = model.kkt(q, v, t0, self.p)
+        if not self._scaled:  # the run's first segment: its force scale (the event
+            # functions' lock forces are measured in it), from this solve
+            self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v,
+                                                           (a, lam, Phi_q)), True
+            self._lambda_atol()
+        trig = self.triggers = ev.event_list(model, hs.locked)
+        self.push_idx = np.flatnonzero([tr.kind in ev.LOCK_FORCES for tr in trig])
         self.has_push = self.push_idx.size > 0
         self.ev_out = np.zeros(1 + len(self.triggers))  # [always positive, triggers]
         self.ev_near = np.zeros(1)
@@ -281,14 +289,6 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.ev_fn.bind(0, self.y_in)
         self.ev_fn.bind_out(0, self.ev_out)
         self.ev_fn.bind_out(1, self.ev_near)
-        self.n_steps = self.in_place = 0
-        self.t_last = -math.inf
-        self.interrupted = self.stalled = self.crawled = False
-        self.step_budget = opts.max_steps - self.stats.steps
-        # A state taken from IDA's interpolant at a root satisfies the constraints only to
-        # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
-        q, v = project_state(model, q, v, t0, self.p)
-        a, lam, _ = model.kkt(q, v, t0, self.p)
         self.start_state = (q, t0, self.p.copy())  # (its ratio: 1.4 ms with 32 loops)
         y0, yp0 = u.start(q, v, a, lam, t0, model.fill(self.p, t0, q, v))
         self._roundoff_atol(y0)

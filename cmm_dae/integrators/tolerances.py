@@ -47,21 +47,28 @@ def lambda_atol(relaxed: bool, scale: float) -> float:
     return (ATOL_LAMBDA_SINGULAR if relaxed else ATOL_LAMBDA) * scale
 
 
-def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
-                 ) -> float:
+def lambda_scale(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
+                 solved: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
     """Factor on the multipliers' absolute tolerances for a run from (t, q, v).
 
     The mechanism's force scale is the largest of its constraint forces, applied forces
     and inertia forces (``M a``) at that state (N, or N m for moments); the factor is that
     scale over :data:`FORCE_REF`, at least 1, so that the multipliers keep the same
-    relative tolerance however large the forces are.
+    relative tolerance however large the forces are. ``solved``: :meth:`Model.kkt`'s
+    (a, lambda, Phi_q) at that state where the caller has it, the linear solve's (a model
+    without friction from the reaction), whose applied forces are then ``M a + Phi_q^T
+    lambda``.
     """
-    p = model.fill(p, t, q, v)
-    Phi_q, qf, gamma = model._kkt_parts(q, v, t, p)
-    try:
-        a, lam, _ = model.kkt_from(Phi_q, qf, gamma, p)
-    except np.linalg.LinAlgError:  # a singular start is the policy's to report
-        return 1.0
+    if solved is not None and not model.reacting:
+        a, lam, Phi_q = solved
+        qf = model.mass * a + Phi_q.T @ lam
+    else:
+        p = model.fill(p, t, q, v)
+        Phi_q, qf, gamma = model._kkt_parts(q, v, t, p)
+        try:
+            a, lam, _ = model.kkt_from(Phi_q, qf, gamma, p)
+        except np.linalg.LinAlgError:  # a singular start is the policy's to report
+            return 1.0
     force = max(float(np.max(np.abs(x), initial=0.0)) for x in (lam, qf, model.mass * a))
     return max(1.0, force / FORCE_REF) if math.isfinite(force) else 1.0
 
