@@ -109,3 +109,21 @@ def test_gram_band_ratio_is_the_svds_where_it_is_not_small(m, n, kl, ku):
     st = bandsvd.structure(rows, cols, m, n)
     assert bandsvd.ratio(st, B[rows, cols], low_b) == pytest.approx(sb[-1] / sb[0], abs=1e-14)
     assert bandsvd.ratio(st, B[rows, cols], low_b) == bandsvd.ratio(st, B[rows, cols])
+
+
+def test_tridiagonal_form_eigenvalues_and_counts_against_the_closed_form():
+    """The second-difference matrix (2 on the diagonal, -1 beside it, written with a
+    zero second band) has the eigenvalues 2 - 2 cos(k pi / (m + 1)): each by bisection
+    on the band's tridiagonal form within 1e-13 of the largest, and the Sturm counts
+    between them exact."""
+    m = 150
+    low = np.zeros((3, m), order="F")
+    low[0], low[1, :m - 1] = 2.0, -1.0
+    exact = 2.0 - 2.0 * np.cos(np.arange(1, m + 1) * np.pi / (m + 1))
+    tri = bandsvd.gram_tridiagonal(low)
+    got = np.array([bandsvd.eigenvalue(tri, i) for i in range(1, m + 1)])
+    assert np.max(np.abs(got - exact)) <= 1e-13 * exact[-1]
+    mids = 0.5 * (exact[:-1] + exact[1:])
+    assert [bandsvd.count_below(tri, x) for x in mids] == list(range(1, m))
+    assert bandsvd.count_below(tri, 0.5 * exact[0]) == 0
+    assert bandsvd.count_below(tri, 4.0) == m

@@ -388,7 +388,7 @@ def test_collapsed_rows_of_a_long_chain_by_block_inverse_iteration(monkeypatch):
             band, kinematics.active_values_at(model, act, qs, e.t, p)[:, None])
         with monkeypatch.context() as mp:
             mp.setattr(rank, "collapsed_gram", no_dense)
-            drop, basis = rank.collapsed_band(low, band.perm, J, 0.01)
+            drop, basis = rank.collapsed_band(low, band.perm, lambda J=J: J, 0.01)
             assert kinematics.collapsed_rows(model, qs, e.t, p, 0.01) == (
                 drop, kinematics._row_labels(model, act, U, drop))
         assert drop == rank.count_collapsed(s, 0.01) == 32
@@ -408,7 +408,7 @@ def test_collapsed_band_without_a_gap_is_the_dense_eigensolvers():
         lam = np.concatenate([[lam_k] * 5, [1.1 * tau], np.linspace(0.5, 1.0, m - 6)])
         J = np.hstack([np.diag(np.sqrt(lam)), np.zeros((m, 1))])
         low = lam[None, :].copy()  # a diagonal band: J J^T = diag(lam)
-        got = rank.collapsed_band(low, np.arange(m), J, r0)
+        got = rank.collapsed_band(low, np.arange(m), lambda J=J: J, r0)
         dense = rank.collapsed_gram(J, r0, 1.0)
         assert got[0] == dense[0] == 5
         if gapped:

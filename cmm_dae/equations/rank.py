@@ -9,12 +9,14 @@ singular-position logic of both integrators."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.linalg import eigh, eigvals_banded, qr
 from scipy.linalg import null_space as _null_space
 from scipy.linalg.lapack import dpbtrs
 
-from . import banded
+from . import banded, bandsvd
 
 __all__ = ["COLLAPSE", "GRAM_FROM", "RANK_TOL", "collapsed", "collapsed_band", "collapsed_gram",
            "count_collapsed", "dependent", "null_space", "rank", "ratio"]
@@ -102,34 +104,50 @@ def collapsed_gram(J: np.ndarray, r0: float, top: float) -> tuple[int, np.ndarra
 BLOCK_GAP, BLOCK_FROM, BLOCK_ITERATIONS = 1e-4, 100, 2
 
 
-def collapsed_band(low: np.ndarray, perm: np.ndarray, J: np.ndarray, r0: float
-                   ) -> tuple[int, np.ndarray] | None:
+def collapsed_band(low: np.ndarray, perm: np.ndarray, dense: Callable[[], np.ndarray],
+                   r0: float) -> tuple[int, np.ndarray] | None:
     """:func:`collapsed_gram` of a long chain, from the band of its Gram matrix ``J J^T``:
     ``low`` in LAPACK's lower band storage of J's rows reordered by ``perm`` (new row i is
-    row ``perm[i]``). The band's eigenvalues (one reduction, O(rows^2 band)) give the
-    largest and the count under the threshold; where the next eigenvalue is far above the
-    last counted one (:data:`BLOCK_GAP`), an orthonormal basis of their eigenvectors comes
-    from inverse iteration of a block of that many vectors on the band's Cholesky factor
-    (shifted by round-off), without a dense eigensolver (at A02's singular instants, 32
-    and 128 loops: 3.2 against 7.4 ms, 46 against 125 ms; the same counts and rows);
-    else :func:`collapsed_gram`."""
-    lam = eigvals_banded(low, lower=True)
-    top = float(lam[-1]) if lam.size else 0.0
-    k = int(np.sum(lam < (COLLAPSE * r0) ** 2 * top))
-    m = lam.size
-    if COLLAPSE * r0 < GRAM_FROM or not top > 0.0 or k == 0 or m < BLOCK_FROM \
-            or k == m or max(lam[k - 1], 0.0) > BLOCK_GAP * lam[k]:
-        return collapsed_gram(J, r0, top)
+    row ``perm[i]``); ``dense()``: J itself, asked for only where this falls back on
+    :func:`collapsed_gram`. The band's tridiagonal form (one reduction, O(rows^2 band))
+    gives the largest eigenvalue, those under the threshold and the next above it by
+    bisection (all of them, by ``eigvals_banded``, took 1.5 of 3 ms with 32 loops); where
+    the next is far above the last counted one (:data:`BLOCK_GAP`), an orthonormal basis
+    of their eigenvectors comes from inverse iteration of a block of that many vectors on
+    the band's Cholesky factor (shifted by round-off), without a dense eigensolver (at
+    A02's singular instants, 32 and 128 loops: 3.2 against 7.4 ms, 46 against 125 ms;
+    the same counts and rows); else :func:`collapsed_gram`."""
+    m = low.shape[1]
+    if m < BLOCK_FROM:  # (the dense eigensolver is as fast)
+        return collapsed_gram(dense(), r0, _top(low))
+    tri = bandsvd.gram_tridiagonal(low)
+    top = bandsvd.eigenvalue(tri, m) if tri is not None else None
+    if top is None:
+        return collapsed_gram(dense(), r0, float(eigvals_banded(low, lower=True)[-1]))
+    k = bandsvd.count_below(tri, (COLLAPSE * r0) ** 2 * top) if top > 0.0 else None
+    after = bandsvd.eigenvalue(tri, k + 1) if k is not None and 0 < k < m else None
+    # a gap: the k collapsed eigenvalues all at most BLOCK_GAP of the next (or round-off
+    # below zero)
+    if COLLAPSE * r0 < GRAM_FROM or after is None \
+            or bandsvd.count_below(tri, BLOCK_GAP * after) != k:
+        return collapsed_gram(dense(), r0, top)
     c = banded.shifted_cholesky(low, 1e-14 * top)  # (round-off: J may be singular)
     if c is None:
-        return collapsed_gram(J, r0, top)
+        return collapsed_gram(dense(), r0, top)
     # a fixed start (the same on every machine), without a symmetry a chain could share
     X = np.random.default_rng(0).standard_normal((m, k))
     for _ in range(BLOCK_ITERATIONS):
         X, info = dpbtrs(c, X, lower=1)
         if info != 0:
-            return collapsed_gram(J, r0, top)
+            return collapsed_gram(dense(), r0, top)
         X = qr(X, mode="economic", overwrite_a=True, check_finite=False)[0]
     basis = np.empty((m, k))
     basis[perm] = X
     return k, basis
+
+
+def _top(low: np.ndarray) -> float:
+    """The largest eigenvalue of the symmetric band matrix in lower band storage ``low``."""
+    lam = eigvals_banded(low, lower=True, select="i", select_range=(low.shape[1] - 1,
+                                                                    low.shape[1] - 1))
+    return float(lam[-1]) if lam.size else 0.0
