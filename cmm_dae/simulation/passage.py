@@ -24,7 +24,7 @@ from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant
-from .passage_start import START_RATIO, end_may_dip, predicted_start, start_before
+from .passage_start import START_RATIO, dips, end_may_dip, predicted_start, start_before
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
 WATCH_RATIO = 0.3
@@ -129,17 +129,24 @@ def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
 
 def _on_grid(model: Model, p: np.ndarray, ends: tuple, s: np.ndarray, act: np.ndarray,
              exact) -> np.ndarray:
+    """:func:`_on_grids` of one interval."""
+    return _on_grids(model, p, [ends], s, act, [exact])[0]
+
+
+def _on_grids(model: Model, p: np.ndarray, ends: list[tuple], s: np.ndarray, act: np.ndarray,
+              exact: list) -> list[np.ndarray]:
     """A measure of the singular-value ratio on the samples' interpolant between two
-    samples (``ends``: t, q, v at each), at the fractions ``s`` of the interval, whose
-    smallest value lies where the ratio's does: log det(J J^T) where it is defined (one
-    evaluation for the grid, a sparse LU per point on large mechanisms: a chain of 32 loops
-    took 0.13 s per interval with an SVD per point), else ``exact`` (the ratio itself) at
-    each. Next to a passage both are ruled by the smallest singular value, falling to zero
-    at the instant, and the other singular values change little over one interval."""
+    samples (each of ``ends``: t, q, v at each), at the fractions ``s`` of the interval,
+    whose smallest value lies where the ratio's does: log det(J J^T) where it is defined
+    (one evaluation for every interval's grid: one per interval cost 0.4 ms more with 8
+    loops), else ``exact`` (each interval's ratio itself) at each point. Next to a
+    passage both are ruled by the smallest singular value, falling to zero at the
+    instant, and the other singular values change little over one interval."""
     if not 0 < act.size <= model.nq:
-        return np.array([exact(float(x)) for x in s])
-    tx = ends[0] + s * (ends[3] - ends[0])
-    return _log_gram(model, p, tx, hermite(*ends, tx[:, None])[0], act)
+        return [np.array([at(float(x)) for x in s]) for at in exact]
+    tx = [e[0] + s * (e[3] - e[0]) for e in ends]
+    qx = np.vstack([hermite(*e, x[:, None])[0] for e, x in zip(ends, tx, strict=True)])
+    return np.split(_log_gram(model, p, np.concatenate(tx), qx, act), len(ends))
 
 
 def _refined_grid(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray, exact,
@@ -210,7 +217,7 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     found: list[Passage] = []
     searched: set[int] = set()
     candidates, logdet = _candidates(model, p, t, q, act, r)
-    for i in sorted(_dips(candidates, n, r)):
+    for i in sorted(dips(candidates, n, r, WATCH_RATIO)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
@@ -219,14 +226,13 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         # grid first, then searched closely from the one that dips lower, the other only
         # where that finds no passage: its minimum is the shared sample, onto which a
         # bounded search took 30 ratios to converge (A02 with 8 and 32 loops)
-        sides = []
-        for a in range(lo, hi):
-            if a in searched or t[a + 1] <= t[a] or (skip_last and a == n - 2):
-                continue
-            searched.add(a)
-            ends = (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])
-            at, s = _ratio_at(model, p, ends), np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
-            sides.append((a, ends, at, s, _on_grid(model, p, ends, s, act, at)))
+        sides = [(a, (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])) for a in range(lo, hi)
+                 if not (a in searched or t[a + 1] <= t[a] or (skip_last and a == n - 2))]
+        searched.update(a for a, _ in sides)
+        s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
+        ats = [_ratio_at(model, p, ends) for _, ends in sides]
+        grids = _on_grids(model, p, [ends for _, ends in sides], s, act, ats) if sides else []
+        sides = [(a, ends, at, s, g) for (a, ends), at, g in zip(sides, ats, grids, strict=True)]
         for a, ends, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[4]))):
             x, r_min = interval_instant(  # (the coarse grid, refined where it is not enough)
                 model, p, ends, act, at, s, grid, lambda s, g, ends=ends, at=at:
@@ -287,23 +293,6 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
         if abs(zero - t[end]) <= reach:
             candidates.append(end)
     return candidates, d
-
-
-def _dips(candidates: list[int], n: int, r) -> set[int]:
-    """The candidates followed down the exact ratio ``r`` to its own local minimum (next
-    to the determinant's, where the other singular values change fast), those below
-    :data:`WATCH_RATIO`."""
-    dips: set[int] = set()
-    for i in candidates:
-        for _ in range(2):
-            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
-            k = min((lo, i, hi), key=r)
-            if r(k) >= r(i):
-                break
-            i = k
-        if r(i) < WATCH_RATIO:
-            dips.add(i)
-    return dips
 
 
 def _ratio_at(model: Model, p: np.ndarray, ends: tuple):

@@ -1,6 +1,7 @@
 """Where the crossing of a singular position IDA stepped over starts: the last sample before
-it whose singular-value ratio is at least :data:`START_RATIO` (:mod:`.passage`); and
-whether a segment's end sample may be next to one, asked of the log determinant."""
+it whose singular-value ratio is at least :data:`START_RATIO` (:mod:`.passage`); and the
+walks that find the samples next to one: a segment's ends asked of the log determinant,
+its dips followed down the exact ratio."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 
 import numpy as np
 
-__all__ = ["START_RATIO", "end_may_dip", "predicted_start", "start_before"]
+__all__ = ["START_RATIO", "dips", "end_may_dip", "predicted_start", "start_before"]
 
 #: The crossing starts from the last sample before the passage whose ratio is at least
 #: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
@@ -90,3 +91,20 @@ def end_may_dip(d: np.ndarray, t: np.ndarray, end: int, a: int, b: int,
     slope = (rb - ra) / (t[b] - t[a])
     zero = t[a] - ra / slope if slope != 0.0 else math.inf
     return abs(zero - t[end]) <= 2.0 * reach
+
+
+def dips(candidates: list[int], n: int, r, watch: float) -> set[int]:
+    """The candidates followed down the exact ratio ``r`` to its own local minimum (next
+    to the determinant's, where the other singular values change fast), those below
+    ``watch``."""
+    found: set[int] = set()
+    for i in candidates:
+        for _ in range(2):
+            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
+            k = min((lo, i, hi), key=r)
+            if r(k) >= r(i):
+                break
+            i = k
+        if r(i) < watch:
+            found.add(i)
+    return found
