@@ -54,7 +54,7 @@ def test_consistent_start_satisfies_all_levels():
     assert float(c[0]) == pytest.approx(1.0, abs=1e-14)
     assert float(cd_[0]) == pytest.approx(2 * math.pi, rel=1e-13)
     # the next run's start is the one kept, as a copy of its own: changing it changes
-    # nothing kept; other rates are solved anew
+    # nothing kept
     again = assemble_velocities(model, q, 0.0, p, {})
     assert np.array_equal(again, v) and again is not v
     again[:] = 0.0
