@@ -5,6 +5,8 @@ times the largest singular value, absolute."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -127,3 +129,22 @@ def test_tridiagonal_form_eigenvalues_and_counts_against_the_closed_form():
     assert [bandsvd.count_below(tri, x) for x in mids] == list(range(1, m))
     assert bandsvd.count_below(tri, 0.5 * exact[0]) == 0
     assert bandsvd.count_below(tri, 4.0) == m
+
+
+def test_ratio_shown_above_a_bound_against_the_closed_form():
+    """bandsvd.above on the second-difference matrix, whose Gershgorin bound (4) is within
+    1.1e-4 of its largest eigenvalue: it shows the ratio above 0.999 of sqrt(lambda_1 / 4)
+    and never above the ratio itself (nor 1.001 of that bound, where its shifted Cholesky
+    must fail)."""
+    m = 150
+    low = np.zeros((3, m), order="F")
+    low[0], low[1, :m - 1] = 2.0, -1.0
+    lam = 2.0 - 2.0 * np.cos(np.arange(1, m + 1) * np.pi / (m + 1))
+    exact = math.sqrt(lam[0] / lam[-1])
+    shown = math.sqrt(lam[0] / 4.0)
+    assert bandsvd.above(low, 0.999 * shown)
+    assert not bandsvd.above(low, 1.001 * shown)
+    assert not bandsvd.above(low, exact * (1.0 + 1e-9))
+    singular = low.copy()
+    singular[0, 0] = singular[0, -1] = 1.0  # (both ends free: constants, ratio 0)
+    assert not bandsvd.above(singular, 1e-12)

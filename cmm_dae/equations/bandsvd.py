@@ -27,7 +27,9 @@ import scipy.sparse as sp
 from scipy.linalg import cython_lapack, lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["GRAM_RATIO_FROM", "BandSVD", "count_below", "eigenvalue", "gram_ratio",
+from . import banded
+
+__all__ = ["GRAM_RATIO_FROM", "BandSVD", "above", "count_below", "eigenvalue", "gram_ratio",
            "gram_tridiagonal", "ratio", "structure"]
 
 
@@ -228,3 +230,24 @@ def gram_ratio(low: np.ndarray) -> float | None:
     if top is None or low is None or not top > 0.0:
         return None
     return float(np.sqrt(max(low, 0.0) / top))
+
+
+def above(low: np.ndarray, r: float) -> bool:
+    """Whether the square root of the smallest over the largest eigenvalue of the symmetric
+    positive semidefinite band matrix in LAPACK's lower band storage ``low`` (a Gram
+    matrix ``J J^T``: J's singular-value ratio) is certainly above ``r``. The largest
+    eigenvalue is at most the largest absolute row sum g (Gershgorin); a Cholesky
+    factorization of the matrix less ``r^2 g`` succeeds only where every eigenvalue is
+    above that, to its round-off (at most ``(bw + 1) eps g`` times a small constant, taken
+    16): one factorization, O(rows band^2), against the ratio's O(rows^2 band). False
+    where that is not shown (the ratio may still be above ``r``)."""
+    a, m = np.abs(low), low.shape[1]
+    rows = a[0].copy()
+    for k in range(1, low.shape[0]):  # the band's rows, each entry on both sides
+        rows[k:] += a[k, :m - k]
+        rows[:m - k] += a[k, :m - k]
+    g = float(rows.max(initial=0.0))
+    if not (np.isfinite(g) and g > 0.0):
+        return False
+    shift = r * r * g + 16.0 * low.shape[0] * np.finfo(float).eps * g
+    return banded.shifted_cholesky(low, -shift) is not None

@@ -24,7 +24,14 @@ from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant
-from .passage_start import START_RATIO, dips, end_may_dip, predicted_start, start_before
+from .passage_start import (
+    START_RATIO,
+    dips,
+    end_may_dip,
+    predicted_start,
+    shown_above,
+    start_before,
+)
 
 #: A sample whose singular-value ratio is a local minimum below this is looked at closely.
 WATCH_RATIO = 0.3
@@ -253,8 +260,10 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 found.append(Passage(j, a, t_s, r_min, r(j)))
             else:
                 known = max((ratios[i] for i in ratios if i <= a), default=0.0)
-                if known < START_RATIO:  # (the segment's start: low everywhere?)
-                    known = max(known, r(0))
+                if known < START_RATIO:  # the segment's start: low everywhere? (one
+                    # Cholesky shows it above where it is: the same min() below)
+                    known = START_RATIO if 0 not in ratios and shown_above(
+                        model, p, float(t[0]), q[0], act, START_RATIO) else max(known, r(0))
                 found.append(Passage(-1, a, t_s, r_min, min(START_RATIO, known)))
             if first:
                 return found

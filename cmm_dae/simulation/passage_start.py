@@ -9,7 +9,12 @@ import math
 
 import numpy as np
 
-__all__ = ["START_RATIO", "dips", "end_may_dip", "predicted_start", "start_before"]
+from ..equations import banded, bandsvd
+from ..equations.kinematics import active_values_at, gram_band
+from ..equations.model import Model
+
+__all__ = ["START_RATIO", "dips", "end_may_dip", "predicted_start", "shown_above",
+           "start_before"]
 
 #: The crossing starts from the last sample before the passage whose ratio is at least
 #: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
@@ -108,3 +113,15 @@ def dips(candidates: list[int], n: int, r, watch: float) -> set[int]:
         if r(i) < watch:
             found.add(i)
     return found
+
+
+def shown_above(model: Model, p: np.ndarray, t: float, q: np.ndarray, act: np.ndarray,
+                r: float) -> bool:
+    """Whether the constraints' singular-value ratio at (t, q) is shown above ``r`` by one
+    Cholesky factorization of their Gram band (:func:`~.bandsvd.above`: with 32 loops
+    instead of the ratio's 0.9 ms); False where it is not shown or not banded."""
+    band = gram_band(model, act) if 0 < act.size <= model.nq else None
+    if band is None:
+        return False
+    vals = active_values_at(model, act, q, t, p)
+    return bandsvd.above(banded.lower_blocks(band, vals[:, None]), r)
