@@ -149,18 +149,10 @@ def _extreme_ratio(d: np.ndarray, e: np.ndarray) -> float | None:
     off = np.empty(2 * k - 1)
     off[0::2], off[1::2] = d, e
     zero = np.zeros(2 * k)
-    top, low = _eigenvalue(zero, off, 2 * k), _eigenvalue(zero, off, k + 1)
+    top, low = eigenvalue((zero, off), 2 * k), eigenvalue((zero, off), k + 1)
     if top is None or low is None:
         return None
     return max(low, 0.0) / top if top > 0.0 else 0.0
-
-
-def _eigenvalue(d: np.ndarray, e: np.ndarray, i: int) -> float | None:
-    """The i-th smallest eigenvalue (from 1) of the symmetric tridiagonal matrix with
-    diagonal ``d`` and off-diagonal ``e``, by LAPACK's bisection (``dstebz``) to full
-    relative accuracy; None where it fails."""
-    got = lapack.dstebz(d, e, 2, 0.0, 0.0, i, i, 2.0 * np.finfo(float).tiny, b"E")
-    return float(got[1][0]) if got[-1] == 0 else None
 
 
 #: :func:`gram_ratio` is taken for the ratio from this value on: the Gram matrix's
@@ -201,9 +193,11 @@ def gram_tridiagonal(low: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def eigenvalue(tri: tuple[np.ndarray, np.ndarray], i: int) -> float | None:
-    """The i-th smallest eigenvalue (from 1) of the tridiagonal ``tri`` (diagonal,
-    off-diagonal), by bisection to full relative accuracy; None where it fails."""
-    return _eigenvalue(tri[0], tri[1], i)
+    """The i-th smallest eigenvalue (from 1) of the symmetric tridiagonal ``tri``
+    (diagonal, off-diagonal), by LAPACK's bisection (``dstebz``) to full relative
+    accuracy; None where it fails."""
+    got = lapack.dstebz(tri[0], tri[1], 2, 0.0, 0.0, i, i, 2.0 * np.finfo(float).tiny, b"E")
+    return float(got[1][0]) if got[-1] == 0 else None
 
 
 def count_below(tri: tuple[np.ndarray, np.ndarray], x: float) -> int | None:

@@ -3,6 +3,7 @@ them, the impact map, and the rows that become dependent at a dead point or a lo
 
 from __future__ import annotations
 
+import functools
 import weakref
 
 import casadi as ca
@@ -317,15 +318,14 @@ def collapsed_rows(model: Model, q: np.ndarray, t: float, p: np.ndarray, r0: flo
     Gram matrix's band (:func:`~.rank.collapsed_band`: 3.2 against 7.4 ms with 32 loops
     for the dense eigenpairs below the threshold, 46 against 125 ms with 128)."""
     act = model.active_rows(p)
+    dense = functools.cache(lambda: model.constraints(q, t, p).Phi_q[act])  # (on demand)
     band = gram_band(model, act) if act.size <= model.nq else None
     if band is not None:  # a long chain: the Gram matrix's largest and smallest eigenpairs
         low = banded.lower_blocks(band, active_values_at(model, act, q, t, p)[:, None])
-        got = rank.collapsed_band(low, band.perm,
-                                  lambda: model.constraints(q, t, p).Phi_q[act], r0)
+        got = rank.collapsed_band(low, band.perm, dense, r0)
         if got is not None:
             return got[0], _row_labels(model, act, got[1], got[0])
-    J = model.constraints(q, t, p).Phi_q[act]
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
+    U, s, _ = np.linalg.svd(dense(), full_matrices=False)
     drop = rank.count_collapsed(s, r0)
     return drop, _row_labels(model, act, U, drop)
 

@@ -123,7 +123,7 @@ def collapsed_band(low: np.ndarray, perm: np.ndarray, dense: Callable[[], np.nda
     tri = bandsvd.gram_tridiagonal(low)
     top = bandsvd.eigenvalue(tri, m) if tri is not None else None
     if top is None:
-        return collapsed_gram(dense(), r0, float(eigvals_banded(low, lower=True)[-1]))
+        return collapsed_gram(dense(), r0, _top(low))
     k = bandsvd.count_below(tri, (COLLAPSE * r0) ** 2 * top) if top > 0.0 else None
     after = bandsvd.eigenvalue(tri, k + 1) if k is not None and 0 < k < m else None
     # a gap: the k collapsed eigenvalues all at most BLOCK_GAP of the next (or round-off

@@ -200,8 +200,8 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         ``start_ratio`` the ratio a crossing starts from, :data:`START_RATIO`, or the
         largest ratio known at a sample before it, the segment's start among them, where
         that is lower (a mechanism whose ratio is low everywhere): the threshold its rank
-        drop is counted against. The
-        walk back took 4 of 27 exact ratios with 8 and 32 loops, 11 of 34 with 128.
+        drop is counted against. The walk back took 4 of 27 exact ratios with 8 and 32
+        loops, 11 of 34 with 128.
 
     Returns
     -------
