@@ -10,6 +10,7 @@ import pytest
 
 from cmm_dae.simulation.passage_start import (
     START_RATIO,
+    dips,
     end_may_dip,
     predicted_start,
     start_before,
@@ -145,7 +146,30 @@ def test_logged_passages_skip_the_walk_back():
         (x.t, x.ratio, x.interval) for x in logged]
     assert all(x.start >= 0 and x.start_ratio >= START_RATIO for x in full)
     assert all(x.start == -1 and x.start_ratio == START_RATIO for x in logged)
-    assert n_logged < n_full
+    # the dips' own ratios only: their neighbours shown above them by a Cholesky each
+    assert n_logged == 2 < n_full
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_neighbours_shown_above_give_the_same_dips(seed):
+    """Following candidates down the ratio with neighbours shown above a value (here
+    where the ratio is at least 1.5 times it, as a Cholesky bound would) instead of
+    their exact ratios: the same dips, never more exact ratios."""
+    rng = np.random.default_rng(300 + seed)
+    n = int(rng.integers(3, 40))
+    ratios = rng.uniform(0.0, 1.0, n) ** 3
+    candidates = sorted(set(rng.integers(0, n, 4).tolist()))
+    asked: dict[bool, list[int]] = {False: [], True: []}
+
+    def ratio(cheap: bool):
+        return lambda i: asked[cheap].append(i) or float(ratios[i])
+
+    def exceeds(j: int, x: float) -> bool:
+        return True if ratios[j] >= 1.5 * x else float(ratio(True)(j)) > x
+
+    exact = dips(candidates, n, ratio(False), 0.3)
+    assert dips(candidates, n, ratio(True), 0.3, exceeds) == exact
+    assert len(set(asked[True])) <= len(set(asked[False]))
 
 
 def _logdet(t: np.ndarray, t_star: float, k: int) -> np.ndarray:

@@ -221,10 +221,20 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         return ratios[i]
 
     act = model.active_rows(p)
+    shown: dict[int, float] = {}  # sample -> a bound its ratio is shown above
+
+    def exceeds(i: int, x: float) -> bool:  # r(i) > x, by one Cholesky where it shows it
+        if i in ratios or start:  # (a crossing's start is searched on exact ratios,
+            return r(i) > x       # whose walk back the dip's give a first guess)
+        if shown.get(i, -1.0) >= x or shown_above(model, p, float(t[i]), q[i], act, x):
+            shown[i] = max(shown.get(i, -1.0), x)
+            return True
+        return r(i) > x
+
     found: list[Passage] = []
     searched: set[int] = set()
     candidates, logdet = _candidates(model, p, t, q, act, r)
-    for i in sorted(dips(candidates, n, r, WATCH_RATIO)):
+    for i in sorted(dips(candidates, n, r, WATCH_RATIO, exceeds)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
@@ -247,7 +257,7 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             # inside the interval, below both its ends (not an end that starts low and
             # rises, as a segment can right after a crossing), unless the segment may
             # have stopped short of the instant
-            inside = ends_open or r_min < 0.5 * min(r(a), r(a + 1))
+            inside = ends_open or (exceeds(a, 2.0 * r_min) and exceeds(a + 1, 2.0 * r_min))
             if inside and (best is None or r_min < best[0]):
                 best = (r_min, x, a)
             if best is not None and best[0] < PASSAGE_RATIO:
@@ -262,8 +272,11 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 known = max((ratios[i] for i in ratios if i <= a), default=0.0)
                 if known < START_RATIO:  # the segment's start: low everywhere? (one
                     # Cholesky shows it above where it is: the same min() below)
-                    known = START_RATIO if 0 not in ratios and shown_above(
-                        model, p, float(t[0]), q[0], act, START_RATIO) else max(known, r(0))
+                    if 0 not in ratios and shown_above(model, p, float(t[0]), q[0], act,
+                                                       START_RATIO):
+                        known = START_RATIO
+                    else:  # (the neighbours only shown above a dip's ratio as well)
+                        known = max([known, r(0)] + [r(i) for i in shown if i <= a])
                 found.append(Passage(-1, a, t_s, r_min, min(START_RATIO, known)))
             if first:
                 return found

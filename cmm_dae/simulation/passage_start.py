@@ -98,15 +98,18 @@ def end_may_dip(d: np.ndarray, t: np.ndarray, end: int, a: int, b: int,
     return abs(zero - t[end]) <= 2.0 * reach
 
 
-def dips(candidates: list[int], n: int, r, watch: float) -> set[int]:
+def dips(candidates: list[int], n: int, r, watch: float, exceeds=None) -> set[int]:
     """The candidates followed down the exact ratio ``r`` to its own local minimum (next
     to the determinant's, where the other singular values change fast), those below
-    ``watch``."""
+    ``watch``. ``exceeds(j, x)``: whether r(j) > x, where it can be shown without r(j)
+    (a neighbour shown above the candidate's ratio is not lower; exact where None)."""
+    exceeds = exceeds or (lambda j, x: r(j) > x)
     found: set[int] = set()
     for i in candidates:
         for _ in range(2):
-            lo, hi = max(i - 1, 0), min(i + 1, n - 1)
-            k = min((lo, i, hi), key=r)
+            lower = [j for j in (max(i - 1, 0), min(i + 1, n - 1))
+                     if j != i and not exceeds(j, r(i))]
+            k = min(lower, key=r, default=i)
             if r(k) >= r(i):
                 break
             i = k
