@@ -210,7 +210,7 @@ def test_sparse_screen_matches_the_dense_one(monkeypatch):
     nonzeros (banded Cholesky of all samples' Gram matrices in one block-diagonal band):
     the same numbers as the dense path (measured 7e-14 on a chain of 32 loops), and the
     start's assembly is computed once per model."""
-    from cmm_dae.simulation import passage
+    from cmm_dae.simulation import measure
 
     mech = four_bar_chain(32)
     model = cd.Model(mech)
@@ -219,11 +219,11 @@ def test_sparse_screen_matches_the_dense_one(monkeypatch):
     p = model.params()
     act = model.active_rows(p)
     keep = np.r_[True, np.diff(res.t) > 0]
-    sparse = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
+    sparse = measure.log_gram(model, p, res.t[keep], res.data["q"][keep], act)
     with monkeypatch.context() as m:  # the dense path: no band, not sparse
         m.setattr(model, "kkt_sparse", False)
-        m.setattr(passage, "gram_band", lambda *a: None)
-        dense = passage._log_gram(model, p, res.t[keep], res.data["q"][keep], act)
+        m.setattr(measure, "gram_band", lambda *a: None)
+        dense = measure.log_gram(model, p, res.t[keep], res.data["q"][keep], act)
     assert np.max(np.abs(sparse - dense)) <= 1e-10
     def starts() -> int:  # the start's values the model keeps (core.memo.once)
         return sum(1 for key in model._once if key[0] == "start")

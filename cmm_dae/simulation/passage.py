@@ -16,14 +16,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import csc_matrix
-from scipy.sparse.linalg import splu
 
-from ..equations.kinematics import gram_band, gram_function, log_gram, singular_ratio
+from ..equations.kinematics import singular_ratio
 from ..equations.model import Model
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
-from ..singular.tip import interval_instant
+from ..singular.tip import interval_instant, sample_instant
+from .measure import log_gram as _log_gram
 from .passage_start import (
     START_RATIO,
     dips,
@@ -49,8 +48,6 @@ POINTS = 16
 #: one of its neighbours (the ratio at most 0.6 of the neighbour's: a passage gives a
 #: third or less).
 DIP = 2.0 * math.log(1.0 / 0.6)
-#: Samples whose constraint Jacobians are screened in one mapped evaluation.
-CHUNK = 256
 
 
 @dataclass(frozen=True)
@@ -65,73 +62,6 @@ class Passage:
     t: float  #: the singular instant on the samples' interpolant, s
     ratio: float  #: the interpolant's singular-value ratio there
     start_ratio: float  #: the ratio at sample ``start`` (see :func:`passages`)
-
-
-def _mapped_chunks(model: Model, name: str, p: np.ndarray, t: np.ndarray, q: np.ndarray):
-    """``model.<name>`` (of q, t, p) over the samples in chunks of :data:`CHUNK`, one mapped
-    evaluation each (the last chunk padded with its last sample, the padding dropped; fewer
-    samples than a chunk make a chunk of the next power of two, so that the maps built
-    stay few and the padding is less than the samples): yields (first sample, samples in
-    the chunk, the function's outputs)."""
-    size = min(CHUNK, 1 << max(t.size - 1, 1).bit_length())
-    fn = model.mapped(name, size)
-    P = np.repeat(p[:, None], size, axis=1)
-    for k in range(0, t.size, size):
-        m = min(size, t.size - k)
-        qk = np.empty((model.nq, size))
-        tk = np.empty(size)
-        qk[:, :m], tk[:m] = q[k:k + m].T, t[k:k + m]
-        qk[:, m:], tk[m:] = qk[:, m - 1:m], tk[m - 1]
-        yield k, m, fn(qk, tk, P)
-
-
-def _log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-              act: np.ndarray) -> np.ndarray:
-    """log det(J J^T) of the active rows' Jacobian J at every sample (-inf where it is
-    singular): a measure that dips where the ratio dips, at a fraction of the SVDs' cost
-    (1.4 against 11.6 ms on the double-folded cycle's 1005 samples, 96 against 487 ms on
-    102 samples of A02 with 40 loops), evaluated in chunks of one mapped function; from
-    Phi_q's nonzeros alone where the Jacobian is banded or large."""
-    if model.kkt_sparse or gram_band(model, act) is not None:
-        return _log_gram_sparse(model, p, t, q, act)
-    out = np.empty(t.size)
-    gram_function(model)  # (model.gram_fn, built on first use)
-    for k, m, outs in _mapped_chunks(model, "gram_fn", p, t, q):
-        G = np.asarray(outs[0]).reshape(model.m, -1, model.m).transpose(1, 0, 2)[:m]
-        try:  # Cholesky: a third of an LU's time on these small symmetric matrices
-            L = np.linalg.cholesky(G)
-            out[k:k + m] = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-        except np.linalg.LinAlgError:  # one is singular to round-off: LU for the chunk
-            sign, logdet = np.linalg.slogdet(G)
-            out[k:k + m] = np.where(sign > 0.0, logdet, -np.inf)
-    return out
-
-
-def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-                     act: np.ndarray) -> np.ndarray:
-    """:func:`_log_gram` of a large mechanism from Phi_q's nonzeros alone: J J^T as a sparse
-    matrix per sample and log det from its sparse LU (a chain of 32 loops: the dense path
-    copied 115 MB per chunk of samples and took a third of the run)."""
-    pat = model.phi_q_pattern
-    colind, row = (np.asarray(x, dtype=np.int64) for x in pat.get_ccs())
-    shape = (pat.size1(), pat.size2())
-    out = np.empty(t.size)
-    for k, m, outs in _mapped_chunks(model, "phi_q_nz_fn", p, t, q):
-        nz = np.asarray(outs[0]).reshape(row.size, -1)[:, :m]  # (nonzero, sample)
-        banded = log_gram(model, act, nz)
-        if banded is not None:  # a narrow band: a banded Cholesky per sample
-            out[k:k + m] = banded
-            continue
-        nz = nz.T
-        for j in range(m):
-            J = csc_matrix((nz[j], row, colind), shape=shape)[act]
-            try:
-                d = splu((J @ J.T).tocsc(), permc_spec="MMD_AT_PLUS_A").U.diagonal()
-            except RuntimeError:  # exactly singular
-                out[k + j] = -np.inf
-                continue
-            out[k + j] = float(np.sum(np.log(np.abs(d)))) if np.all(d != 0.0) else -np.inf
-    return out
 
 
 def _on_grid(model: Model, p: np.ndarray, ends: tuple, s: np.ndarray, act: np.ndarray,
@@ -213,24 +143,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     n = t.size
     if n < 2:
         return []
-    ratios: dict[int, float] = {}
-
-    def r(i: int) -> float:  # the exact ratio, where it is needed
-        if i not in ratios:
-            ratios[i] = singular_ratio(model, q[i], float(t[i]), p)
-        return ratios[i]
-
     act = model.active_rows(p)
-    shown: dict[int, float] = {}  # sample -> a bound its ratio is shown above
-
-    def exceeds(i: int, x: float) -> bool:  # r(i) > x, by one Cholesky where it shows it
-        if i in ratios or start:  # (a crossing's start is searched on exact ratios,
-            return r(i) > x       # whose walk back the dip's give a first guess)
-        if shown.get(i, -1.0) >= x or shown_above(model, p, float(t[i]), q[i], act, x):
-            shown[i] = max(shown.get(i, -1.0), x)
-            return True
-        return r(i) > x
-
+    known = _Ratios(model, p, t, q, act, exact_only=start)
+    ratios, r, exceeds = known.exact, known.r, known.exceeds
     found: list[Passage] = []
     searched: set[int] = set()
     candidates, logdet = _candidates(model, p, t, q, act, r)
@@ -239,15 +154,20 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
         # interpolant's ratio is smallest (next to the sample the other side's approaches
-        # the sample's own ratio, which can be below PASSAGE_RATIO already). Both on the
-        # grid first, then searched closely from the one that dips lower, the other only
-        # where that finds no passage: its minimum is the shared sample, onto which a
-        # bounded search took 30 ratios to converge (A02 with 8 and 32 loops)
+        # the sample's own ratio, which can be below PASSAGE_RATIO already). Newton's
+        # method from the sample across both first (the motion through the singular
+        # position itself); else both on the grid, then searched closely from the one
+        # that dips lower, the other only where that finds no passage: its minimum is the
+        # shared sample, onto which a bounded search took 30 ratios to converge (A02)
         sides = [(a, (t[a], q[a], v[a], t[a + 1], q[a + 1], v[a + 1])) for a in range(lo, hi)
                  if not (a in searched or t[a + 1] <= t[a] or (skip_last and a == n - 2))]
         searched.update(a for a, _ in sides)
-        s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
         ats = [_ratio_at(model, p, ends) for _, ends in sides]
+        tip = sample_instant(model, p, i, sides, act, ats)
+        if tip is not None and (ends_open or (exceeds(tip[0], 2.0 * tip[2])
+                                              and exceeds(tip[0] + 1, 2.0 * tip[2]))):
+            sides, ats, best = [], [], (tip[2], tip[1], tip[0])
+        s = np.linspace(0.0, 1.0, POINTS + 1)[1:-1]
         grids = _on_grids(model, p, [ends for _, ends in sides], s, act, ats) if sides else []
         sides = [(a, ends, at, s, g) for (a, ends), at, g in zip(sides, ats, grids, strict=True)]
         for a, ends, at, s, grid in sorted(sides, key=lambda side: float(np.min(side[4]))):
@@ -269,18 +189,57 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
                 j = start_before(a, r, predicted_start(a, logdet, ratios))
                 found.append(Passage(j, a, t_s, r_min, r(j)))
             else:
-                known = max((ratios[i] for i in ratios if i <= a), default=0.0)
-                if known < START_RATIO:  # the segment's start: low everywhere? (one
-                    # Cholesky shows it above where it is: the same min() below)
-                    if 0 not in ratios and shown_above(model, p, float(t[0]), q[0], act,
-                                                       START_RATIO):
-                        known = START_RATIO
-                    else:  # (the neighbours only shown above a dip's ratio as well)
-                        known = max([known, r(0)] + [r(i) for i in shown if i <= a])
-                found.append(Passage(-1, a, t_s, r_min, min(START_RATIO, known)))
+                found.append(Passage(-1, a, t_s, r_min, known.logged_start(a)))
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
+
+
+class _Ratios:
+    """The exact ratios of a segment's samples, computed where they are needed, and
+    bounds they are shown above by one Cholesky each (:func:`.shown_above`)."""
+
+    def __init__(self, model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
+                 act: np.ndarray, exact_only: bool):
+        self.model, self.p, self.t, self.q, self.act = model, p, t, q, act
+        # (a crossing's start is searched on exact ratios, whose walk back the dip's
+        # give a first guess: there every comparison takes them)
+        self.exact_only = exact_only
+        self.exact: dict[int, float] = {}
+        self.shown: dict[int, float] = {}  # sample -> a bound its ratio is shown above
+
+    def r(self, i: int) -> float:
+        """The exact ratio at sample i."""
+        if i not in self.exact:
+            self.exact[i] = singular_ratio(self.model, self.q[i], float(self.t[i]), self.p)
+        return self.exact[i]
+
+    def exceeds(self, i: int, x: float) -> bool:
+        """Whether the ratio at sample i is above x: by one Cholesky where that shows it."""
+        if i in self.exact or self.exact_only:
+            return self.r(i) > x
+        if self.shown.get(i, -1.0) >= x or self._above(i, x):
+            self.shown[i] = max(self.shown.get(i, -1.0), x)
+            return True
+        return self.r(i) > x
+
+    def _above(self, i: int, x: float) -> bool:
+        return shown_above(self.model, self.p, float(self.t[i]), self.q[i], self.act, x)
+
+    def logged_start(self, a: int) -> float:
+        """The ratio a logged passage in interval ``a`` counts its rank drop against
+        (:func:`passages`' ``start``): :data:`START_RATIO`, or the largest ratio known at
+        a sample up to a, the segment's start among them, where that is lower."""
+        known = max((r for i, r in self.exact.items() if i <= a), default=0.0)
+        if known >= START_RATIO:
+            return START_RATIO
+        # the segment's start: low everywhere? (one Cholesky shows it above where it is:
+        # the same as its exact ratio would give)
+        if 0 not in self.exact and self._above(0, START_RATIO):
+            return START_RATIO
+        # (with the samples only shown above a dip's ratio, as the comparisons needed)
+        return min(START_RATIO, max([known, self.r(0)]
+                                    + [self.r(i) for i in self.shown if i <= a]))
 
 
 def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,

@@ -33,7 +33,7 @@ from ..equations.kinematics import active_values_at, gram_band
 from ..equations.model import Model
 from .instant import grid_bracket, hermite, interval_minimum
 
-__all__ = ["TIP_RATIO", "interval_instant", "largest_singular", "newton_tip"]
+__all__ = ["TIP_RATIO", "interval_instant", "largest_singular", "newton_tip", "sample_instant"]
 
 #: The exact ratio at the instant below which it is taken as the ratio's minimum (the
 #: motion passes through the singular position; round-off leaves about 1e-14 there).
@@ -87,6 +87,45 @@ def interval_instant(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray,
     if refine is not None:
         s, grid = refine(s, grid)
     return interval_minimum(at, s, grid)
+
+
+def sample_instant(model: Model, p: np.ndarray, centre: int, sides: list[tuple[int, tuple]],
+                   act: np.ndarray, ats: list[Callable[[float], float]]
+                   ) -> tuple[int, float, float] | None:
+    """The instant of a passage next to the sample ``centre`` (a dip of the ratio), by
+    :func:`newton_tip` from that sample itself across the intervals beside it, without
+    the grids :func:`interval_instant` starts from (with 8 loops each grid cost as much
+    as the steps it saves).
+
+    ``sides``: the intervals (index of their first sample, ``ends``: t, q, v at each)
+    beside ``centre``, one or both; ``ats``: the ratio on each, as a function of the
+    fraction of it. Returns (interval, fraction, ratio there) where the ratio is below
+    :data:`TIP_RATIO` (shown as in :func:`interval_instant`), else None."""
+    band = gram_band(model, act) if 0 < act.size <= model.nq else None
+    if band is None or not sides:
+        return None
+    # x < 0 on the interval before the sample (fraction 1 + x), x >= 0 on the one after
+    left = [(a, e, at) for (a, e), at in zip(sides, ats, strict=True) if a < centre]
+    right = [(a, e, at) for (a, e), at in zip(sides, ats, strict=True) if a >= centre]
+
+    def side(x: float) -> tuple[int, tuple, Callable, float]:
+        a, ends, at = (left if x < 0.0 or not right else right)[0]
+        return a, ends, at, (1.0 + x if a < centre else x)
+
+    def values_at(x: float) -> np.ndarray:
+        _, ends, _, f = side(x)
+        tx = float(ends[0] + f * (ends[3] - ends[0]))
+        return active_values_at(model, act, hermite(*ends, tx)[0], tx, p)
+
+    got = newton_tip(values_at, band, model.nq, -1.0 if left else 0.0,
+                     1.0 if right else 0.0, 0.0)
+    if got is None:
+        return None
+    x, sigma = got
+    a, _, at, f = side(x)
+    big = largest_singular(values_at(x), band, model.nq)
+    r = sigma / big if big > 0.0 and sigma / big < TIP_RATIO else at(f)
+    return (a, f, r) if r < TIP_RATIO else None
 
 
 def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchur,
