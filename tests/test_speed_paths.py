@@ -206,10 +206,14 @@ def test_clean_fallback_without_compiler(tmp_path):
 
 
 def test_sparse_screen_matches_the_dense_one(monkeypatch):
-    """The stepped-over screen of a large mechanism takes log det(J J^T) from Phi_q's
+    """The stepped-over screen of a large mechanism takes its measure from Phi_q's
     nonzeros (banded Cholesky of all samples' Gram matrices in one block-diagonal band):
-    the same numbers as the dense path (measured 7e-14 on a chain of 32 loops), and the
-    start's assembly is computed once per model."""
+    log det(J J^T) the same as the dense path (measured 7e-14 on a chain of 32 loops);
+    on this chain, whose rows are all active, log det(J M^-1 J^T) (the Schur complement
+    post-processing factors), the same as numpy's slogdet of that matrix formed densely
+    from the model's Phi_q (to 1e-10 of a log determinant near 171; measured 2.3e-13).
+    The start's
+    assembly is computed once per model."""
     from cmm_dae.simulation import measure
 
     mech = four_bar_chain(32)
@@ -219,12 +223,21 @@ def test_sparse_screen_matches_the_dense_one(monkeypatch):
     p = model.params()
     act = model.active_rows(p)
     keep = np.r_[True, np.diff(res.t) > 0]
-    sparse = measure.log_gram(model, p, res.t[keep], res.data["q"][keep], act)
-    with monkeypatch.context() as m:  # the dense path: no band, not sparse
+    t, q = res.t[keep], res.data["q"][keep]
+    assert measure.weighted(model, act)
+    weighted = measure.log_gram(model, p, t, q, act)
+    dense_w = np.array([np.linalg.slogdet((J / model.mass) @ J.T)[1] for J in (
+        model.constraints(qi, float(ti), p).Phi_q[act] for ti, qi in zip(t, q, strict=True))])
+    assert np.max(np.abs(weighted - dense_w)) <= 1e-10
+    with monkeypatch.context() as m:
+        m.setattr(measure, "weighted", lambda *a: False)
+        sparse = measure.log_gram(model, p, t, q, act)
+        # the dense path: no band, not sparse
         m.setattr(model, "kkt_sparse", False)
         m.setattr(measure, "gram_band", lambda *a: None)
-        dense = measure.log_gram(model, p, res.t[keep], res.data["q"][keep], act)
+        dense = measure.log_gram(model, p, t, q, act)
     assert np.max(np.abs(sparse - dense)) <= 1e-10
+
     def starts() -> int:  # the start's values the model keeps (core.memo.once)
         return sum(1 for key in model._once if key[0] == "start")
 
@@ -416,3 +429,45 @@ def test_collapsed_band_without_a_gap_is_the_dense_eigensolvers():
                 <= 1e-12
         else:
             assert np.array_equal(got[1], dense[1])
+
+
+def test_post_processing_reuses_the_screens_solves(monkeypatch):
+    """The stepped-over screen solves every sample's accelerations and multipliers with
+    its measure (the Schur complement's Cholesky) and the run keeps them: post-processing
+    solves none again, and every series is bit for bit what its own solve gives (A02 with
+    8 loops, two passages, the run's start sample included)."""
+    from cmm_dae.description import iftomm
+    from cmm_dae.integrators import contract
+    from cmm_dae.results import post
+
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    solved = []
+    batch = post.batch_kkt
+    monkeypatch.setattr(post, "batch_kkt", lambda *a: solved.append(a[1].size) or batch(*a))
+    kept = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    assert solved == [] and len(kept.events) == 2
+    monkeypatch.setattr(contract.Recorder, "kkt", lambda self, *a: None)
+    own = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
+    assert solved  # (its own solve this time)
+    for key in ("a", "lam", "jforce", "jtorque", "drift_pos", "drift_vel"):
+        assert np.array_equal(kept.data[key], own.data[key]), key
+
+
+def test_recorder_keeps_solves_of_the_samples_it_holds():
+    """Solved samples kept with the recorder: NaN rows where none were kept, dropped
+    with the samples a cut-back truncates."""
+    from cmm_dae.integrators.contract import Recorder
+
+    rec = Recorder()
+    assert rec.kkt(2, 1) is None
+    rec.add_block(np.arange(5.0), np.zeros((5, 2)), np.zeros((5, 2)), 0)
+    rec.keep_kkt(1, np.ones((3, 2)), 2.0 * np.ones((3, 1)))
+    a, lam = rec.kkt(2, 1)
+    assert np.isnan(a[[0, 4]]).all() and (a[1:4] == 1.0).all() and (lam[1:4] == 2.0).all()
+    assert rec.at(3)[0] == 3.0 and rec.at(3)[3] == 0
+    rec.truncate(2)
+    a, lam = rec.kkt(2, 1)
+    assert a.shape == (2, 2) and np.isnan(a[0]).all() and (a[1] == 1.0).all()
+    rec.truncate(1)
+    assert rec.kkt(2, 1) is None

@@ -122,11 +122,12 @@ def full_band(low: np.ndarray, bw: int) -> np.ndarray:
 
 
 def banded_solve(st: BandedSchur, vals: np.ndarray, mass: np.ndarray, Qf: np.ndarray,
-          gamma: np.ndarray, free: np.ndarray) -> np.ndarray:
+          gamma: np.ndarray, free: np.ndarray, logdet: list | None = None) -> np.ndarray:
     """Multipliers (n, m) of every sample from Phi_q's nonzeros ``vals`` (nnz, n; at
     ``st.rows``, ``st.cols``), Q (nq, n), gamma (m, n) and the inactive-row flags ``free``
     (m, n): the layouts mapped functions return. Raises numpy.linalg.LinAlgError on a
-    singular sample."""
+    singular sample. ``logdet``: a list that gets log det(Phi_q M^-1 Phi_q^T) of every
+    sample (n,) appended, from the Cholesky factor, where every row is active."""
     n, m = vals.shape[1], st.m
     big = lower_blocks(st, vals, 1.0 / mass)
     big[0] -= free[st.perm].T.reshape(-1)  # S = Phi_q M^-1 Phi_q^T - D
@@ -143,7 +144,9 @@ def banded_solve(st: BandedSchur, vals: np.ndarray, mass: np.ndarray, Qf: np.nda
     # pivot that is not positive (a sample next to a singular position)
     info = 1
     if not free.any():
-        _, x, info = dpbsv(big, rhs, lower=1)
+        c, x, info = dpbsv(big, rhs, lower=1)
+        if info == 0 and logdet is not None:  # (the factor's diagonal, block by block)
+            logdet.append(2.0 * np.log(c[0].reshape(n, m)).sum(axis=1))
     if info != 0:
         _, _, x, info = dgbsv(st.bw, st.bw, full_band(big, st.bw), rhs, overwrite_ab=True,
                               overwrite_b=True)
@@ -166,17 +169,18 @@ def for_model(model) -> BandedSchur | None:
     return _cache[model]
 
 
-def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray] | None:
+def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray,
+                        logdet: list | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """(a, lambda) of every sample of a banded mechanism (:func:`for_model`) from Phi_q's
-    nonzeros alone; None if a sample's Schur complement is singular."""
+    nonzeros alone; None if a sample's Schur complement is singular. ``logdet``: see
+    :func:`banded_solve`."""
     n, st = t.size, for_model(model)
     kkt_nz_function(model)
     vals, Qf, gamma = (np.asarray(x).reshape(-1, n) for x in model.mapped(
         "kkt_nz_fn", n)(q.T, v.T, t, P.T))
     free = np.asarray(model.mapped("free_fn", n)(P.T)[0]).reshape(-1, n)
     try:
-        lam = banded_solve(st, vals, model.mass, Qf, gamma, free)
+        lam = banded_solve(st, vals, model.mass, Qf, gamma, free, logdet)
     except np.linalg.LinAlgError:
         return None
     # Phi_q^T lambda, nonzero by nonzero

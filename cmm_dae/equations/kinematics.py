@@ -274,14 +274,14 @@ def gram_function(model: Model) -> ca.Function:
     return fn
 
 
-def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None:
-    """log det(J J^T) of the active rows ``act`` at many states at once, from Phi_q's
-    nonzeros ``nz`` (nonzeros in the CSC order of ``model.phi_q_nz_fn``, states: the
-    layout of its mapped evaluation): the Gram matrices in their banded structure
-    (:func:`gram_band`), each factored by a banded Cholesky (LAPACK dpbtrf); -inf where
-    one is not positive definite (singular to round-off). None where the structure is not
-    banded. A chain of 32 loops: one sparse LU per state took most of the stepped-over
-    screen."""
+def log_gram(model: Model, act: np.ndarray, nz: np.ndarray, scale: np.ndarray | None = None
+             ) -> np.ndarray | None:
+    """log det(J J^T) (``J diag(scale) J^T`` with ``scale``, per coordinate) of the active
+    rows ``act`` at many states at once, from Phi_q's nonzeros ``nz`` (nonzeros in the CSC
+    order of ``model.phi_q_nz_fn``, states: its mapped evaluation's layout): the Gram
+    matrices in their banded structure (:func:`gram_band`), each factored by a banded
+    Cholesky (LAPACK dpbtrf); -inf where one is not positive definite (singular to
+    round-off). None where the structure is not banded (32 loops: a sparse LU each)."""
     band = gram_band(model, act) if act.size <= model.nq else None
     if band is None:
         return None
@@ -290,7 +290,7 @@ def log_gram(model: Model, act: np.ndarray, nz: np.ndarray) -> np.ndarray | None
     # one call (one call per state: 20 us each, most of it the call, on A02 with 8 loops);
     # a block that is not positive definite stops the factorization: -inf for it, and on
     # from the next
-    big = banded.lower_blocks(band, nz[_csc_index(model, act)])
+    big = banded.lower_blocks(band, nz[_csc_index(model, act)], scale)
     out = np.empty(n)
     start = 0
     while start < n:

@@ -83,9 +83,38 @@ class Recorder:
         self._blocks: list[tuple[np.ndarray, ...]] = []
         self._single: list[tuple[float, np.ndarray, np.ndarray, int]] = []
         self._n = 0
+        # accelerations and multipliers of runs of samples, solved already (first index,
+        # a, lambda): the stepped-over screen's KKT solves, which post-processing reuses
+        self._kkt: list[tuple[int, np.ndarray, np.ndarray]] = []
+
+    def keep_kkt(self, n0: int, a: np.ndarray, lam: np.ndarray) -> None:
+        """Keep the accelerations (k, nq) and multipliers (k, m) of the samples from index
+        ``n0`` on, solved by the same batch post-processing would call
+        (:func:`~cmm_dae.equations.kkt.batch`)."""
+        if a.shape[0]:
+            self._kkt.append((n0, a.copy(), lam.copy()))
+
+    def kkt(self, nq: int, m: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The accelerations (n, nq) and multipliers (n, m) kept, NaN at the samples where
+        none were (post-processing solves those); None where none were kept."""
+        if not self._kkt:
+            return None
+        a, lam = np.full((self._n, nq), np.nan), np.full((self._n, m), np.nan)
+        for n0, ak, lk in self._kkt:
+            a[n0:n0 + ak.shape[0]], lam[n0:n0 + lk.shape[0]] = ak, lk
+        return a, lam
 
     def __len__(self) -> int:
         return self._n
+
+    def at(self, i: int) -> tuple[float, np.ndarray, np.ndarray, int]:
+        """Sample i: time, positions, velocities, configuration index."""
+        self._flush()
+        for b in self._blocks:
+            if i < b[0].size:
+                return float(b[0][i]), b[1][i], b[2][i], int(b[3][i])
+            i -= b[0].size
+        raise IndexError("no such sample")
 
     @property
     def last_t(self) -> float:
@@ -144,6 +173,7 @@ class Recorder:
                 kept.append(tuple(x[:k] for x in b))
             start = end
         self._blocks, self._n = kept, min(self._n, n)
+        self._kkt = [(n0, a[:n - n0], lam[:n - n0]) for n0, a, lam in self._kkt if n0 < n]
 
     def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         self._flush()

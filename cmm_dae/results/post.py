@@ -50,10 +50,15 @@ def chunk_size(model: Model) -> int:
 
 
 def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray,
-             active: np.ndarray) -> dict[str, np.ndarray]:
-    """The per-sample series of one chunk of samples (see :func:`build_result`)."""
+             active: np.ndarray, solved: tuple | None = None) -> dict[str, np.ndarray]:
+    """The per-sample series of one chunk of samples (see :func:`build_result`);
+    ``solved``: their accelerations and multipliers where the run solved them already
+    (NaN where it did not: then the chunk's are solved here)."""
     n = t.size
-    a, lam = batch_kkt(model, t, q, v, P)
+    if solved is not None and np.isfinite(solved[0]).all() and np.isfinite(solved[1]).all():
+        a, lam = solved
+    else:
+        a, lam = batch_kkt(model, t, q, v, P)
     outputs.series_function(model)  # (model.series_fn, built on first use)
     c, cd, cdd, *extras, phi, hvel = (
         np.asarray(x).reshape(-1, n).T
@@ -82,7 +87,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  params: list[np.ndarray], events: list[Event], stats: Stats,
                  status: Status = Status.SUCCESS, message: str = "success",
                  event_sample: np.ndarray | None = None,
-                 work: np.ndarray | None = None) -> Result:
+                 work: np.ndarray | None = None, solved: tuple | None = None) -> Result:
     """Post-process sampled states into a :class:`Result`.
 
     Parameters
@@ -91,7 +96,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     ``configurations``; params : the parameter vector of each configuration;
     event_sample : (n_events,) index of the sample holding the state right after each event;
     work : (n, 4) each sample's works (J) since the sample before it as the integrator
-    integrated them (drivers, loads, dampers, kinetic friction; NaN where it did not).
+    integrated them (drivers, loads, dampers, kinetic friction; NaN where it did not);
+    solved : the accelerations (n, nq) and multipliers (n, m) the run solved already by
+    the same batch (the stepped-over screen's; NaN rows where it did not).
 
     Running out of memory here, after the run, keeps the run: the Result then holds the
     sampled states alone (``t``, ``q``, ``v``, configurations, events, works), its status
@@ -103,7 +110,7 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     event_sample = (np.asarray(event_sample, int) if event_sample is not None
                     else np.zeros(0, int))
     try:
-        data = _series(model, t, q, v, config, configurations, params)
+        data = _series(model, t, q, v, config, configurations, params, solved)
     except MemoryError as e:
         data = {"t": t, "q": q, "v": v, "config": np.asarray(config, int)}
         message = (f"out of memory while post-processing {n} samples ({type(e).__name__}"
@@ -117,8 +124,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
 
 
 def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: np.ndarray,
-            configurations: list[Configuration], params: list[np.ndarray]
-            ) -> dict[str, np.ndarray]:
+            configurations: list[Configuration], params: list[np.ndarray],
+            solved: tuple | None = None) -> dict[str, np.ndarray]:
     """Every per-sample series of a Result (see :func:`build_result`)."""
     n = t.size
     P = np.array([params[c] for c in config]).reshape(n, -1)
@@ -136,7 +143,8 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
         # cost more to build than to run on a large model, are built for few sizes
         width = size if k == size else max(8, 1 << (k - 1).bit_length())
         idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
-        out = _samples(model, t[idx], q[idx], v[idx], P[idx], active[idx])
+        out = _samples(model, t[idx], q[idx], v[idx], P[idx], active[idx],
+                       None if solved is None else (solved[0][idx], solved[1][idx]))
         return {key: val[:k] for key, val in out.items()}
 
     ser: dict[str, np.ndarray] = {}

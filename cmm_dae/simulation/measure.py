@@ -1,6 +1,15 @@
 """The stepped-over screen's measure of the constraints' singular-value ratio at many
 states at once: log det(J J^T) of the active rows' Jacobian J, which dips where the ratio
-dips (:mod:`.passage`), evaluated in chunks of one mapped CasADi function."""
+dips (:mod:`.passage`), evaluated in chunks of one mapped CasADi function.
+
+On a banded mechanism whose rows are all active (a chain of loops) the measure is
+log det(J M^-1 J^T) instead, the mass-weighted Gram matrix (its smallest eigenvalues
+collapse with J's smallest singular values as J J^T's do): that is the Schur complement
+post-processing factors at every sample to solve for the multipliers, so the screen takes
+the samples' measure from that very solve (:func:`sample_measure`) and the run keeps its
+accelerations and multipliers for post-processing, which then does not solve them again
+(A02 with 32 loops: the screen's own factorizations of the samples took a tenth of a
+run)."""
 
 from __future__ import annotations
 
@@ -8,11 +17,13 @@ import numpy as np
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
+from ..equations import banded
 from ..equations.kinematics import gram_band, gram_function
 from ..equations.kinematics import log_gram as banded_log_gram
 from ..equations.model import Model
+from ..results.post import chunk_size
 
-__all__ = ["CHUNK", "log_gram", "mapped_chunks"]
+__all__ = ["CHUNK", "log_gram", "mapped_chunks", "sample_measure", "weighted"]
 
 #: Samples whose constraint Jacobians are screened in one mapped evaluation.
 CHUNK = 256
@@ -36,13 +47,47 @@ def mapped_chunks(model: Model, name: str, p: np.ndarray, t: np.ndarray, q: np.n
         yield k, m, fn(qk, tk, P)
 
 
+def weighted(model: Model, act: np.ndarray) -> bool:
+    """Whether the screen's measure is log det(J M^-1 J^T), the Schur complement
+    post-processing factors (see the module): a banded mechanism (for both), every row
+    active, no callable load (post-processing evaluates those sample by sample) and no
+    friction from the reaction (solved sample by sample where a joint slips)."""
+    return (act.size == model.m and not model.callables and not model.reacting
+            and banded.for_model(model) is not None and gram_band(model, act) is not None)
+
+
+def sample_measure(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
+                   v: np.ndarray, act: np.ndarray
+                   ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """The measure at a segment's samples (:func:`log_gram`) and, where it is the Schur
+    complement's (:func:`weighted`), the samples' accelerations (n, nq) and multipliers
+    (n, m) solved with it by post-processing's own batch, in its chunks (the same maps);
+    None where they are not (then post-processing solves them)."""
+    if not weighted(model, act):
+        return log_gram(model, p, t, q, act), None
+    n, size = t.size, chunk_size(model)
+    a, lam, d = np.empty((n, model.nq)), np.empty((n, model.m)), np.empty(n)
+    for i in range(0, n, size):
+        k = min(size, n - i)
+        width = size if k == size else max(8, 1 << (k - 1).bit_length())
+        idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+        logdet: list = []
+        got = banded.batch_from_nonzeros(model, t[idx], q[idx], v[idx],
+                                         np.repeat(p[None], width, axis=0), logdet)
+        if got is None or not logdet:  # a singular sample: the measure alone
+            return log_gram(model, p, t, q, act), None
+        a[i:i + k], lam[i:i + k], d[i:i + k] = got[0][:k], got[1][:k], logdet[0][:k]
+    return d, (a, lam)
+
+
 def log_gram(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-              act: np.ndarray) -> np.ndarray:
+             act: np.ndarray) -> np.ndarray:
     """log det(J J^T) of the active rows' Jacobian J at every sample (-inf where it is
-    singular): a measure that dips where the ratio dips, at a fraction of the SVDs' cost
-    (1.4 against 11.6 ms on the double-folded cycle's 1005 samples, 96 against 487 ms on
-    102 samples of A02 with 40 loops), evaluated in chunks of one mapped function; from
-    Phi_q's nonzeros alone where the Jacobian is banded or large."""
+    singular; J M^-1 J^T where :func:`weighted`): a measure that dips where the ratio
+    dips, at a fraction of the SVDs' cost (1.4 against 11.6 ms on the double-folded
+    cycle's 1005 samples, 96 against 487 ms on 102 samples of A02 with 40 loops),
+    evaluated in chunks of one mapped function; from Phi_q's nonzeros alone where the
+    Jacobian is banded or large."""
     if model.kkt_sparse or gram_band(model, act) is not None:
         return _log_gram_sparse(model, p, t, q, act)
     out = np.empty(t.size)
@@ -67,11 +112,12 @@ def _log_gram_sparse(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     colind, row = (np.asarray(x, dtype=np.int64) for x in pat.get_ccs())
     shape = (pat.size1(), pat.size2())
     out = np.empty(t.size)
+    scale = 1.0 / model.mass if weighted(model, act) else None
     for k, m, outs in mapped_chunks(model, "phi_q_nz_fn", p, t, q):
         nz = np.asarray(outs[0]).reshape(row.size, -1)[:, :m]  # (nonzero, sample)
-        banded = banded_log_gram(model, act, nz)
-        if banded is not None:  # a narrow band: a banded Cholesky per sample
-            out[k:k + m] = banded
+        band = banded_log_gram(model, act, nz, scale)
+        if band is not None:  # a narrow band: a banded Cholesky per sample
+            out[k:k + m] = band
             continue
         nz = nz.T
         for j in range(m):

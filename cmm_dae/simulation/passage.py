@@ -23,6 +23,7 @@ from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant, sample_instant
 from .measure import log_gram as _log_gram
+from .measure import sample_measure
 from .passage_start import (
     START_RATIO,
     dips,
@@ -103,7 +104,7 @@ def _refined_grid(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray, exa
 
 def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
              first: bool = False, ends_open: bool = False, skip_last: bool = False,
-             start: bool = True) -> list[Passage]:
+             start: bool = True, keep=None) -> list[Passage]:
     """The singular positions the samples of one segment pass, in time order.
 
     Parameters
@@ -132,6 +133,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         that is lower (a mechanism whose ratio is low everywhere): the threshold its rank
         drop is counted against. The walk back took 4 of 27 exact ratios with 8 and 32
         loops, 11 of 34 with 128.
+    keep : callable, optional
+        ``keep(a, lam)``: given the samples' accelerations and multipliers where the
+        screen solved them with its measure (:func:`.measure.sample_measure`).
 
     Returns
     -------
@@ -148,7 +152,7 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     ratios, r, exceeds = known.exact, known.r, known.exceeds
     found: list[Passage] = []
     searched: set[int] = set()
-    candidates, logdet = _candidates(model, p, t, q, act, r)
+    candidates, logdet = _candidates(model, p, t, q, v, act, r, keep)
     for i in sorted(dips(candidates, n, r, WATCH_RATIO, exceeds)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
@@ -242,12 +246,12 @@ class _Ratios:
                                     + [self.r(i) for i in self.shown if i <= a]))
 
 
-def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-                act: np.ndarray, r) -> tuple[list[int], np.ndarray | None]:
+def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+                act: np.ndarray, r, keep=None) -> tuple[list[int], np.ndarray | None]:
     """The samples where the ratio may dip to zero: the segment's ends, and local minima
     of log det(J J^T) well below one neighbour (every sample where the rows are none or
     more than the coordinates), and that log det at every sample (None there). ``r(i)``:
-    the exact ratio at sample i."""
+    the exact ratio at sample i; ``keep``: see :func:`passages`."""
     n = t.size
     if not 0 < act.size <= model.nq:
         return list(range(n)), None
@@ -255,7 +259,9 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     # nearer the instant has at most a third of the farther neighbour's (a drop of 2 ln 3
     # in the log determinant, the other singular values unchanged); where the
     # determinant is flat, round-off makes local minima everywhere.
-    d = _log_gram(model, p, t, q, act)
+    d, solved = sample_measure(model, p, t, q, v, act)
+    if solved is not None and keep is not None:
+        keep(*solved)
     lo_d, hi_d = np.append(d[0], d[:-1]), np.append(d[1:], d[-1])
     dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
     candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
@@ -297,9 +303,24 @@ def _samples(t: float, q: np.ndarray, v: np.ndarray, rec: Recorder, n0: int,
     return ts, qs, vs
 
 
+def _keeper(rec: Recorder, n0: int, t: float, q: np.ndarray, v: np.ndarray):
+    """``keep`` for :func:`passages` on the samples of :func:`_samples` (the segment's
+    start (t, q, v), then its samples in ``rec`` from ``n0`` on, then maybe its end):
+    their solved accelerations and multipliers into ``rec``, the start's too where it is
+    the sample before them (the run's start, or the state after an event), recorded in
+    the same configuration."""
+    k, i = len(rec) - n0, 1
+    if 0 < n0 < len(rec):
+        t0, q0, v0, c0 = rec.at(n0 - 1)
+        if t0 == t and c0 == rec.at(n0)[3] and np.array_equal(q0, q) \
+                and np.array_equal(v0, v):
+            i = 0
+    return lambda a, lam: rec.keep_kkt(n0 - 1 + i, a[i:1 + k], lam[i:1 + k])
+
+
 def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-                rec: Recorder, n0: int, end: SegmentEnd, last: bool = False
-                ) -> tuple[int, SegmentEnd] | None:
+                rec: Recorder, n0: int, end: SegmentEnd, last: bool = False,
+                keep: bool = False) -> tuple[int, SegmentEnd] | None:
     """Where a segment would be cut back to cross a singular position its samples pass.
 
     Parameters
@@ -317,6 +338,9 @@ def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndar
     last : bool
         Cut back before the last passage (where the integrator gave up next to one), not
         the first.
+    keep : bool
+        Keep the samples' accelerations and multipliers in ``rec`` where the screen
+        solves them (:func:`passages`' ``keep``; once per segment).
 
     Returns
     -------
@@ -326,7 +350,8 @@ def passage_cut(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndar
         Nothing is changed: the caller truncates ``rec``.
     """
     ts, qs, vs = _samples(t, q, v, rec, n0, end)
-    found = passages(model, p, ts, qs, vs, first=not last, ends_open=True)
+    found = passages(model, p, ts, qs, vs, first=not last, ends_open=True,
+                     keep=_keeper(rec, n0, t, q, v) if keep else None)
     if not found:
         return None
     j = found[-1].start
@@ -348,7 +373,7 @@ def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
     ts, qs, vs = _samples(t, q, v, rec, n0, end)
     out = []
     for ps in passages(model, p, ts, qs, vs, skip_last=end.reason == "singular",
-                       start=False):
+                       start=False, keep=_keeper(rec, n0, t, q, v)):
         after = n0 + ps.interval  # ts[k] is rec[n0 + k - 1]
         if after >= len(rec):
             continue
@@ -363,7 +388,7 @@ def watch_segment(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nd
     """With a branch rule: the segment cut back to the last sample before a singular
     position IDA stepped over (its samples beyond dropped, its end event forgotten: IDA
     meets it again), to be crossed there; else the segment's end as it was."""
-    cut = passage_cut(model, p, t, q, v, rec, n0, end)
+    cut = passage_cut(model, p, t, q, v, rec, n0, end, keep=True)
     if cut is None:
         return end
     rec.truncate(cut[0])

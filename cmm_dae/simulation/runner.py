@@ -303,8 +303,8 @@ def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], sta
     """The Result of the run so far (post-processed), with how IDA ran in its meta; raised
     inside a :class:`SolverError` where the run failed and ``throw`` asks for it."""
     integ.after_run(time.perf_counter() - wall0)
-    res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events,
-                       stats, status, message, np.array(after, int), rec.works())
+    res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events, stats,
+                       status, message, after, rec.works(), rec.kkt(model.nq, model.m))
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
     # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
     res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if integ.method == "ida"
