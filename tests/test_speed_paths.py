@@ -471,3 +471,20 @@ def test_recorder_keeps_solves_of_the_samples_it_holds():
     assert a.shape == (2, 2) and np.isnan(a[0]).all() and (a[1] == 1.0).all()
     rec.truncate(1)
     assert rec.kkt(2, 1) is None
+
+
+def test_post_processing_chunks_pad_at_most_a_quarter():
+    """Chunk widths (the sizes mapped functions are built for): every sample once, in
+    order, the last one repeated as padding; at most a quarter of the width padding from
+    8 samples on (powers of two padded 201 samples to 256); four widths an octave."""
+    from cmm_dae.results.post import chunk_indices
+
+    widths = set()
+    for n in range(1, 3000):
+        k, idx = chunk_indices(0, n, 4096)
+        assert k == n and np.array_equal(idx[:n], np.arange(n)) and np.all(idx[n:] == n - 1)
+        assert idx.size == 8 if n <= 8 else 4 * (idx.size - n) < idx.size
+        widths.add(idx.size)
+    assert len([w for w in widths if 1024 < w <= 2048]) == 4
+    k, idx = chunk_indices(128, 201, 64)  # a full chunk keeps the chunk size
+    assert k == 64 and np.array_equal(idx, np.arange(128, 192))

@@ -42,6 +42,22 @@ CHUNK = 2048
 CHUNK_BYTES = 32 * 2**20
 
 
+def chunk_indices(i: int, n: int, size: int) -> tuple[int, np.ndarray]:
+    """The chunk of samples from i on (of n, chunks of ``size``): how many it holds (k)
+    and the indices it is evaluated at, padded with its last sample to a width the mapped
+    functions are built for: ``size``, else the least of 2^j, 1.25, 1.5 or 1.75 times
+    2^j (at least 8) that holds k (the maps, which cost more to build than to run on a
+    large model, stay few; the padding at most a quarter of the samples: 201 samples of
+    a 2-s run take 224, where the next power of two took 256)."""
+    k = min(size, n - i)
+    width = size
+    if k < size:
+        base = max(8, 1 << max(k - 1, 1).bit_length() - 1)  # k <= 2 base
+        width = next(w for w in (base, 5 * base // 4, 3 * base // 2, 7 * base // 4, 2 * base)
+                     if w >= k)
+    return k, np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+
+
 def chunk_size(model: Model) -> int:
     """Samples post-processed at a time: :data:`CHUNK`, or fewer (a power of two, at least
     16) where a chunk's Phi_q would pass :data:`CHUNK_BYTES`."""
@@ -138,11 +154,7 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
     size = chunk_size(model)
 
     def chunk(i: int) -> dict[str, np.ndarray]:
-        k = min(size, n - i)
-        # padded (its last sample repeated) to a power of two: the mapped functions, which
-        # cost more to build than to run on a large model, are built for few sizes
-        width = size if k == size else max(8, 1 << (k - 1).bit_length())
-        idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+        k, idx = chunk_indices(i, n, size)
         out = _samples(model, t[idx], q[idx], v[idx], P[idx], active[idx],
                        None if solved is None else (solved[0][idx], solved[1][idx]))
         return {key: val[:k] for key, val in out.items()}

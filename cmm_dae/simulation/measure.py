@@ -21,7 +21,7 @@ from ..equations import banded
 from ..equations.kinematics import gram_band, gram_function
 from ..equations.kinematics import log_gram as banded_log_gram
 from ..equations.model import Model
-from ..results.post import chunk_size
+from ..results.post import chunk_indices, chunk_size
 
 __all__ = ["CHUNK", "log_gram", "mapped_chunks", "sample_measure", "weighted"]
 
@@ -68,12 +68,10 @@ def sample_measure(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
     n, size = t.size, chunk_size(model)
     a, lam, d = np.empty((n, model.nq)), np.empty((n, model.m)), np.empty(n)
     for i in range(0, n, size):
-        k = min(size, n - i)
-        width = size if k == size else max(8, 1 << (k - 1).bit_length())
-        idx = np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
+        k, idx = chunk_indices(i, n, size)
         logdet: list = []
         got = banded.batch_from_nonzeros(model, t[idx], q[idx], v[idx],
-                                         np.repeat(p[None], width, axis=0), logdet)
+                                         np.repeat(p[None], idx.size, axis=0), logdet)
         if got is None or not logdet:  # a singular sample: the measure alone
             return log_gram(model, p, t, q, act), None
         a[i:i + k], lam[i:i + k], d[i:i + k] = got[0][:k], got[1][:k], logdet[0][:k]

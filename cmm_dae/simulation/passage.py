@@ -222,13 +222,16 @@ class _Ratios:
         """Whether the ratio at sample i is above x: by one Cholesky where that shows it."""
         if i in self.exact or self.exact_only:
             return self.r(i) > x
-        if self.shown.get(i, -1.0) >= x or self._above(i, x):
-            self.shown[i] = max(self.shown.get(i, -1.0), x)
-            return True
-        return self.r(i) > x
+        return self._above(i, x) or self.r(i) > x
 
     def _above(self, i: int, x: float) -> bool:
-        return shown_above(self.model, self.p, float(self.t[i]), self.q[i], self.act, x)
+        """Whether one Cholesky shows the ratio at sample i above x (kept: once each)."""
+        if self.shown.get(i, -1.0) >= x:
+            return True
+        if shown_above(self.model, self.p, float(self.t[i]), self.q[i], self.act, x):
+            self.shown[i] = x
+            return True
+        return False
 
     def logged_start(self, a: int) -> float:
         """The ratio a logged passage in interval ``a`` counts its rank drop against
