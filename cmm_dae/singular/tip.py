@@ -44,8 +44,12 @@ TIP_RATIO = 1e-9
 #: loops cross within 6e-9 s of each other at rtol 1e-3; a fourth step, from vectors that
 #: round-off decides, goes up again).
 STEPS = 8
-#: The step (fraction of the interval) of the central difference that gives the slope.
+#: The step (fraction of the interval) of the difference that gives the slope.
 DIFF = 1e-6
+#: Newton's steps stop where the smallest singular value is at most this many units of
+#: round-off (of J's largest row norm): the instant, to the precision the vectors allow
+#: (A02 reaches 5 to 2000 units there; a step more went up again).
+FLOOR = 4096
 #: Power iterations for the largest singular value's lower bound (its Rayleigh quotient
 #: rises to it from below; A02's, 8 to 128 loops, are within 3.2e-3 of it after these).
 POWER = 20
@@ -77,8 +81,7 @@ def interval_instant(model: Model, p: np.ndarray, ends: tuple, act: np.ndarray,
         got = newton_tip(values_at, band, model.nq, lo, hi, float(s[k]))
         if got is not None:
             x, sigma = got  # (an upper bound on the ratio, then the ratio where need be)
-            big = largest_singular(values_at(x), band, model.nq)
-            r = sigma / big if big > 0.0 and sigma / big < TIP_RATIO else at(x)
+            r = tip_ratio(values_at(x), sigma, band, model.nq, lambda x=x: at(x))
             if r < TIP_RATIO:
                 return x, r
         if refine is None:
@@ -123,9 +126,27 @@ def sample_instant(model: Model, p: np.ndarray, centre: int, sides: list[tuple[i
         return None
     x, sigma = got
     a, _, at, f = side(x)
-    big = largest_singular(values_at(x), band, model.nq)
-    r = sigma / big if big > 0.0 and sigma / big < TIP_RATIO else at(f)
+    r = tip_ratio(values_at(x), sigma, band, model.nq, lambda: at(f))
     return (a, f, r) if r < TIP_RATIO else None
+
+
+def tip_ratio(vals: np.ndarray, sigma: float, band: banded.BandedSchur, nq: int,
+              exact: Callable[[], float]) -> float:
+    """The ratio at Newton's instant (J's structural nonzeros ``vals``, ``sigma`` an upper
+    bound on its smallest singular value): ``sigma`` over a lower bound on the largest,
+    J's largest row norm first (one product; enough at a passage, where sigma is
+    round-off), then :func:`largest_singular`'s; ``exact()`` where neither shows it
+    below :data:`TIP_RATIO`."""
+    for big in (_largest_row(vals, band), None):
+        big = largest_singular(vals, band, nq) if big is None else big
+        if big > 0.0 and sigma / big < TIP_RATIO:
+            return sigma / big
+    return exact()
+
+
+def _largest_row(vals: np.ndarray, band: banded.BandedSchur) -> float:
+    """J's largest row norm: a lower bound on its largest singular value."""
+    return float(np.sqrt(np.max(np.bincount(band.rows, weights=vals * vals), initial=0.0)))
 
 
 def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchur,
@@ -166,11 +187,13 @@ def newton_tip(values_at: Callable[[float], np.ndarray], band: banded.BandedSchu
             # vectors any mix of the collapsed ones, and a step from there lands further
             return best[1], best[0]
         best = (norm, x)
-        if norm == 0.0:
-            return x, 0.0  # exactly singular here
+        if norm <= FLOOR * np.finfo(float).eps * _largest_row(vals, band):
+            return x, norm  # round-off: a step from here lands anywhere near
         weights = w[band.rows] * (u[band.cols] / norm)  # w . J n = values . weights
+        # (a forward difference: its error, h times the value's curvature, slows the
+        # steps' quadratic convergence by a factor h only)
         h = DIFF * (hi - lo)
-        slope = float((values_at(x + h) - values_at(x - h)) @ weights) / (2.0 * h)
+        slope = float((values_at(x + h) - vals) @ weights) / h
         if not np.isfinite(slope) or slope == 0.0:
             return None
         x -= norm / slope
