@@ -46,6 +46,7 @@ class BandedSchur:
     perm: np.ndarray      # (m,) the reordering: new row i is old row perm[i]
     bw: int               # half bandwidth after reordering
     m: int
+    dest: np.ndarray      # (nlow,) each product's row in to_lower (its entry's flat index)
 
 
 def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
@@ -76,9 +77,10 @@ def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
     # holds it), A[i, j] at row i - j of column j of a (bw + 1, m) Fortran array
     low = i >= j
     la, lb, i, j = pa[low], pb[low], i[low], j[low]
-    to_lower = sp.csr_matrix((np.ones(la.size), (j * (bw + 1) + i - j, np.arange(la.size))),
+    dest = j * (bw + 1) + i - j
+    to_lower = sp.csr_matrix((np.ones(la.size), (dest, np.arange(la.size))),
                              shape=((bw + 1) * m, la.size))
-    return BandedSchur(rows, cols, la, lb, cols[la], to_lower, perm, bw, m)
+    return BandedSchur(rows, cols, la, lb, cols[la], to_lower, perm, bw, m, dest)
 
 
 def lower_blocks(st: BandedSchur, vals: np.ndarray, scale: np.ndarray | None = None
@@ -96,6 +98,10 @@ def lower_blocks(st: BandedSchur, vals: np.ndarray, scale: np.ndarray | None = N
     if scale is not None:
         prod *= scale[st.lk][:, None]
     n = vals.shape[1]
+    if n == 1:  # one state (a singular instant, a bound): a sparse product's dispatch
+        # cost more than the sum (in the same order: the same bits)
+        low = np.bincount(st.dest, weights=prod[:, 0], minlength=(st.bw + 1) * st.m)
+        return low.reshape(st.m, st.bw + 1).T
     low = st.to_lower @ prod  # ((bw + 1) m, states): summed into S's entries
     return np.ascontiguousarray(low.T).reshape(n * st.m, st.bw + 1).T
 
