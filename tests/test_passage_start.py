@@ -119,7 +119,7 @@ def test_logged_passages_skip_the_walk_back():
     is far above it away from the passages), with fewer exact ratios."""
     import cmm_dae as cd
     from cmm_dae.description import iftomm
-    from cmm_dae.simulation import passage
+    from cmm_dae.simulation import passage, passage_start
 
     mech = iftomm.a02_four_bar(8)
     model = cd.Model(mech)
@@ -135,19 +135,20 @@ def test_logged_passages_skip_the_walk_back():
     runs = {}
     for start in (True, False):
         counted.clear()
-        passage.singular_ratio = counting
+        passage.singular_ratio = passage_start.singular_ratio = counting
         try:
             runs[start] = (passage.passages(model, p, t, q, v, start=start), len(counted))
         finally:
-            passage.singular_ratio = ratio
+            passage.singular_ratio = passage_start.singular_ratio = ratio
     (full, n_full), (logged, n_logged) = runs[True], runs[False]
     assert len(full) == len(logged) == 2
     assert [(x.t, x.ratio, x.interval) for x in full] == [
         (x.t, x.ratio, x.interval) for x in logged]
     assert all(x.start >= 0 and x.start_ratio >= START_RATIO for x in full)
     assert all(x.start == -1 and x.start_ratio == START_RATIO for x in logged)
-    # the dips' own ratios only: their neighbours shown above them by a Cholesky each
-    assert n_logged == 2 < n_full
+    # no exact ratio: the dips' bounded from above, their neighbours shown above that
+    # bound, by a Cholesky each
+    assert n_logged == 0 < n_full
 
 
 @pytest.mark.parametrize("seed", range(30))
@@ -170,6 +171,10 @@ def test_neighbours_shown_above_give_the_same_dips(seed):
     exact = dips(candidates, n, ratio(False), 0.3)
     assert dips(candidates, n, ratio(True), 0.3, exceeds) == exact
     assert len(set(asked[True])) <= len(set(asked[False]))
+    # with a bound on a candidate's ratio (here 1.2 times it) standing for it where the
+    # neighbours are shown above the bound: the same dips again
+    assert dips(candidates, n, ratio(True), 0.3, exceeds,
+                lambda i: 1.2 * float(ratios[i])) == exact
 
 
 def _logdet(t: np.ndarray, t_star: float, k: int) -> np.ndarray:

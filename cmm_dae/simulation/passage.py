@@ -25,11 +25,10 @@ from ..singular.tip import interval_instant, sample_instant
 from .measure import log_gram as _log_gram
 from .measure import sample_measure
 from .passage_start import (
-    START_RATIO,
+    SampleRatios,
     dips,
     end_may_dip,
     predicted_start,
-    shown_above,
     start_before,
 )
 
@@ -148,12 +147,12 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
     if n < 2:
         return []
     act = model.active_rows(p)
-    known = _Ratios(model, p, t, q, act, exact_only=start)
+    known = SampleRatios(model, p, t, q, act, exact_only=start)
     ratios, r, exceeds = known.exact, known.r, known.exceeds
     found: list[Passage] = []
     searched: set[int] = set()
     candidates, logdet = _candidates(model, p, t, q, v, act, r, keep)
-    for i in sorted(dips(candidates, n, r, WATCH_RATIO, exceeds)):
+    for i in sorted(dips(candidates, n, r, WATCH_RATIO, exceeds, known.upper)):
         lo, hi = max(i - 1, 0), min(i + 1, n - 1)
         best: tuple[float, float, int] | None = None  # (ratio, fraction, interval)
         # the intervals on either side of the dipping sample: the instant is where the
@@ -197,56 +196,6 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
             if first:
                 return found
     return sorted(found, key=lambda ps: ps.t)
-
-
-class _Ratios:
-    """The exact ratios of a segment's samples, computed where they are needed, and
-    bounds they are shown above by one Cholesky each (:func:`.shown_above`)."""
-
-    def __init__(self, model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
-                 act: np.ndarray, exact_only: bool):
-        self.model, self.p, self.t, self.q, self.act = model, p, t, q, act
-        # (a crossing's start is searched on exact ratios, whose walk back the dip's
-        # give a first guess: there every comparison takes them)
-        self.exact_only = exact_only
-        self.exact: dict[int, float] = {}
-        self.shown: dict[int, float] = {}  # sample -> a bound its ratio is shown above
-
-    def r(self, i: int) -> float:
-        """The exact ratio at sample i."""
-        if i not in self.exact:
-            self.exact[i] = singular_ratio(self.model, self.q[i], float(self.t[i]), self.p)
-        return self.exact[i]
-
-    def exceeds(self, i: int, x: float) -> bool:
-        """Whether the ratio at sample i is above x: by one Cholesky where that shows it."""
-        if i in self.exact or self.exact_only:
-            return self.r(i) > x
-        return self._above(i, x) or self.r(i) > x
-
-    def _above(self, i: int, x: float) -> bool:
-        """Whether one Cholesky shows the ratio at sample i above x (kept: once each)."""
-        if self.shown.get(i, -1.0) >= x:
-            return True
-        if shown_above(self.model, self.p, float(self.t[i]), self.q[i], self.act, x):
-            self.shown[i] = x
-            return True
-        return False
-
-    def logged_start(self, a: int) -> float:
-        """The ratio a logged passage in interval ``a`` counts its rank drop against
-        (:func:`passages`' ``start``): :data:`START_RATIO`, or the largest ratio known at
-        a sample up to a, the segment's start among them, where that is lower."""
-        known = max((r for i, r in self.exact.items() if i <= a), default=0.0)
-        if known >= START_RATIO:
-            return START_RATIO
-        # the segment's start: low everywhere? (one Cholesky shows it above where it is:
-        # the same as its exact ratio would give)
-        if 0 not in self.exact and self._above(0, START_RATIO):
-            return START_RATIO
-        # (with the samples only shown above a dip's ratio, as the comparisons needed)
-        return min(START_RATIO, max([known, self.r(0)]
-                                    + [self.r(i) for i in self.shown if i <= a]))
 
 
 def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
