@@ -54,6 +54,11 @@ FLOOR = 4096
 #: Power iterations for the largest singular value's lower bound (its Rayleigh quotient
 #: rises to it from below; A02's, 8 to 128 loops, are within 3.2e-3 of it after these).
 POWER = 20
+#: Inverse iterations for :func:`ratio_above`: where many singular values collapse together
+#: (a chain of identical loops) and spread at a sample next to the instant, each one
+#: draws the vector a factor (their spread) squared further to the least of them.
+BOUND_ITERATIONS = 6
+
 #: Inverse iterations a step (the collapsed singular values are 1e-3 or less of the
 #: others there: each iteration gains that factor or more).
 ITERATIONS = 2
@@ -153,7 +158,7 @@ def ratio_above(vals: np.ndarray, band: banded.BandedSchur, nq: int) -> float | 
     largest row norm was 2.8 times below the largest singular value with 32 loops); one
     banded Cholesky and products, where the exact ratio reduces the band to tridiagonal
     form. None where it cannot be factored."""
-    w = _left_vector(vals, band)
+    w = _left_vector(vals, band, BOUND_ITERATIONS)
     big = largest_singular(vals, band, nq)
     if w is None or not big > 0.0:
         return None
@@ -239,18 +244,19 @@ def _jt(vals: np.ndarray, band: banded.BandedSchur, x: np.ndarray, nq: int) -> n
     return np.bincount(band.cols, weights=vals * x[band.rows], minlength=nq)
 
 
-def _left_vector(vals: np.ndarray, band: banded.BandedSchur) -> np.ndarray | None:
+def _left_vector(vals: np.ndarray, band: banded.BandedSchur, iterations: int = ITERATIONS
+                 ) -> np.ndarray | None:
     """A unit vector in the span of ``J J^T``'s eigenvectors of its smallest eigenvalues
-    (J's left singular vectors, in J's row order), by inverse iteration on the banded
-    Gram matrix shifted by round-off times its largest diagonal entry (positive definite
-    also where J is singular); None where it cannot be factored."""
+    (J's left singular vectors, in J's row order), by ``iterations`` of inverse iteration
+    on the banded Gram matrix shifted by round-off times its largest diagonal entry
+    (positive definite also where J is singular); None where it cannot be factored."""
     low = banded.lower_blocks(band, vals[:, None])
     c = banded.shifted_cholesky(low, 1e-14 * float(np.max(low[0])))
     if c is None:
         return None
     # (a fixed start without symmetry: a chain's identical loops give symmetric vectors)
     y = 1.0 + 0.5 * np.sin(np.arange(band.m))
-    for _ in range(ITERATIONS):
+    for _ in range(iterations):
         y, info = dpbtrs(c, y, lower=1)
         if info != 0:
             return None
