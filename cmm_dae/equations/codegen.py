@@ -73,6 +73,20 @@ class Buffered:
                 for o, (r, c) in zip(self.outs, self.shapes, strict=True)]
 
 
+def map_width(k: int, size: int) -> int:
+    """The number of samples a mapped evaluation of ``k`` of them (at most ``size``, the
+    chunk) is built for, the rest padding: ``size`` for a full chunk, else the least of
+    2^j, 1.25, 1.5 or 1.75 times 2^j (at least 8) that holds k. The maps, which cost more
+    to build than to run on a large model, stay few (four an octave); the padding is at
+    most a quarter of the width (201 samples of a 2-s run take 224, where the next power
+    of two took 256)."""
+    if k >= size:
+        return size
+    base = max(8, 1 << max(k - 1, 1).bit_length() - 1)  # k <= 2 base
+    return min(size, next(w for w in (base, 5 * base // 4, 3 * base // 2, 7 * base // 4,
+                                      2 * base) if w >= k))
+
+
 def cache_dir() -> Path:
     """Where compiled libraries are kept: ``$CMM_DAE_CACHE`` (default, also when it is set
     but empty, ``~/.cache/cmm_dae``)."""

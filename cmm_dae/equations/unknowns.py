@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 
 from ..description.mechanism import GROUND, Mechanism
-from .codegen import Buffered
+from .codegen import Buffered, map_width
 
 
 def ground_pins(mech: Mechanism) -> dict[str, str]:
@@ -234,10 +234,10 @@ class Unknowns:
         out = np.empty((n, 2 * nq))
         if n == 0:
             return out[:, :nq], out[:, nq:]
-        # chunks of a power of two (at most 256) through the buffer API: a map per segment
-        # length, its result converted from a CasADi matrix, took 6 % of a run of A02 with
-        # 32 loops
-        size = min(256, 1 << max(n - 1, 1).bit_length())
+        # chunks of at most 256 (codegen.map_width) through the buffer API: a map per
+        # segment length, its result converted from a CasADi matrix, took 6 % of a run of
+        # A02 with 32 loops
+        size = map_width(n, 256)
         fn = self._maps.get(size)
         if fn is None:
             fn = self._maps[size] = Buffered(self._full.map(size))

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core.errors import Status
 from ..equations import outputs
+from ..equations.codegen import map_width
 from ..equations.kkt import batch as batch_kkt
 from ..equations.model import Model
 from ..equations.reaction import level
@@ -44,17 +45,10 @@ CHUNK_BYTES = 32 * 2**20
 
 def chunk_indices(i: int, n: int, size: int) -> tuple[int, np.ndarray]:
     """The chunk of samples from i on (of n, chunks of ``size``): how many it holds (k)
-    and the indices it is evaluated at, padded with its last sample to a width the mapped
-    functions are built for: ``size``, else the least of 2^j, 1.25, 1.5 or 1.75 times
-    2^j (at least 8) that holds k (the maps, which cost more to build than to run on a
-    large model, stay few; the padding at most a quarter of the samples: 201 samples of
-    a 2-s run take 224, where the next power of two took 256)."""
+    and the indices it is evaluated at, padded with its last sample to the width the
+    mapped functions are built for (:func:`~cmm_dae.equations.codegen.map_width`)."""
     k = min(size, n - i)
-    width = size
-    if k < size:
-        base = max(8, 1 << max(k - 1, 1).bit_length() - 1)  # k <= 2 base
-        width = next(w for w in (base, 5 * base // 4, 3 * base // 2, 7 * base // 4, 2 * base)
-                     if w >= k)
+    width = map_width(k, size)
     return k, np.concatenate([np.arange(i, i + k), np.full(width - k, i + k - 1)])
 
 
