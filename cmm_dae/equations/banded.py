@@ -139,7 +139,7 @@ def banded_solve(st: BandedSchur, vals: np.ndarray, mass: np.ndarray, Qf: np.nda
     big[0] -= free[st.perm].T.reshape(-1)  # S = Phi_q M^-1 Phi_q^T - D
     # Phi_q M^-1 Q, nonzero by nonzero, summed into rows by a sparse product (np.add.at
     # took a sixth of the solve: 1.1 of 6 ms for 64 samples with 32 loops)
-    rhs = _scatter(st.rows, m).T @ (vals * (Qf[st.cols] / mass[st.cols][:, None]))
+    rhs = _scatter(st.rows, m) @ (vals * (Qf[st.cols] / mass[st.cols][:, None]))
     rhs = np.ascontiguousarray((rhs - gamma)[st.perm].T).reshape(-1)
     # one banded factorization of all the samples' systems as the blocks of one
     # block-diagonal band matrix (their coupling entries are zero, so the arithmetic is
@@ -190,7 +190,7 @@ def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     except np.linalg.LinAlgError:
         return None
     # Phi_q^T lambda, nonzero by nonzero
-    force = _scatter(st.cols, model.nq).T @ (vals * lam.T[st.rows])
+    force = _scatter(st.cols, model.nq) @ (vals * lam.T[st.rows])
     return (Qf - force).T / model.mass, lam
 
 
@@ -209,12 +209,13 @@ def kkt_nz_function(model: Any) -> ca.Function:
 @functools.lru_cache(maxsize=16)
 def _scatter_cached(index: bytes, size: int) -> sp.csr_matrix:
     where = np.frombuffer(index, dtype=np.int64)
-    return sp.csr_matrix((np.ones(where.size), (np.arange(where.size), where)),
-                         shape=(where.size, size))
+    return sp.csr_matrix((np.ones(where.size), (where, np.arange(where.size))),
+                         shape=(size, where.size))
 
 
 def _scatter(index: np.ndarray, size: int) -> sp.csr_matrix:
-    """The (entries, size) matrix that sums entry e into position ``index[e]``."""
+    """The (size, entries) matrix whose product sums entry e into row ``index[e]`` (built
+    as such: transposing it at every use took 0.2 ms a run with 8 loops)."""
     return _scatter_cached(np.asarray(index, dtype=np.int64).tobytes(), size)
 
 
