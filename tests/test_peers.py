@@ -125,3 +125,16 @@ def test_without_exudyn_the_error_says_how_to_get_it(monkeypatch):
     assert not peers_exudyn.exudyn_available()
     with pytest.raises(cd.CmmError, match=r"pip install 'cmm_dae\[peers\]'"):
         peers_exudyn.a02_exudyn(1, 0.1)
+
+
+def test_side_by_side_timings_alternate():
+    """The codes compared run in turn (a slow spell of a shared machine falls on both),
+    each warmed once first; each gets its best time and its last result."""
+    from cmm_dae.studies.bench import best_times
+
+    order: list[str] = []
+    got = best_times([lambda: order.append("a") or len(order),
+                      lambda: order.append("b") or -len(order)], 3)
+    assert order == ["a", "b"] * 4
+    assert [r for _, r in got] == [7, -8]
+    assert all(0.0 <= t < 1.0 for t, _ in got)

@@ -32,6 +32,22 @@ def best_time(fn, repeat: int) -> tuple[float, object]:
     return best, res
 
 
+def best_times(fns: list, repeat: int) -> list[tuple[float, object]]:
+    """:func:`best_time` of several functions side by side: each warmed once, then
+    ``repeat`` rounds in which each runs once in turn, so that a slow spell of a shared
+    machine falls on all of them (timed one after the other, a spell had moved a ratio
+    by a third): (best wall time, last result) of each."""
+    res = [fn() for fn in fns]
+    best = [float("inf")] * len(fns)
+    for _ in range(repeat):
+        for i, fn in enumerate(fns):
+            gc.collect()
+            t = time.perf_counter()
+            res[i] = fn()
+            best[i] = min(best[i], time.perf_counter() - t)
+    return list(zip(best, res, strict=True))
+
+
 def _peak(fn) -> float:
     """Peak Python-side memory (numpy arrays included) of one run, MiB."""
     gc.collect()
