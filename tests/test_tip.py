@@ -70,35 +70,50 @@ def test_newton_gives_up_outside_its_bracket():
     assert newton_tip(lambda x: _blocks(x)[2], band, 4 * BLOCKS + 1, 0.4, 0.45, 0.41) is None
 
 
-@pytest.mark.parametrize("loops", [8, 32])
-def test_a02_passages_by_newton_are_the_ratios_minimum(loops):
-    """A02's two logged passages (rtol 1e-3): the instants the parabolic search on the
-    exact ratio finds (to 1e-9 of the interval), the ratio there bounded at round-off
-    without an exact ratio (twelve for the two by the parabolas)."""
+def _a02_passages(loops: int, counted: tuple, variants: dict) -> tuple[np.ndarray, dict]:
+    """A02's logged passages (2 s, rtol 1e-3) searched in its samples once per variant
+    (``{name: (module, attribute, replacement)}``, the replacement in place during the
+    search), counting the calls of ``counted`` (module, attribute): the samples' times
+    and ``{name: (passages, calls)}``."""
     import cmm_dae as cd
     from cmm_dae.description import iftomm
     from cmm_dae.simulation import passage
-    from cmm_dae.singular import tip
 
     mech = iftomm.a02_four_bar(loops)
     model = cd.Model(mech)
     res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
     p, t, q, v = model.params(), res.t, res.data["q"], res.data["v"]
-    ratio, newton = passage.singular_ratio, tip.newton_tip
-    counted: list[int] = []
+    calls: list[int] = []
+    inner = getattr(*counted)
 
     def counting(*args):
-        counted.append(1)
-        return ratio(*args)
+        calls.append(1)
+        return inner(*args)
 
     runs = {}
-    for name, fn in (("newton", newton), ("parabola", lambda *a: None)):
-        counted.clear()
-        passage.singular_ratio, tip.newton_tip = counting, fn
+    for name, (module, attr, fn) in variants.items():
+        calls.clear()
+        kept = getattr(module, attr)
+        setattr(*counted, counting)
+        setattr(module, attr, fn if fn is not None else kept)
         try:
-            runs[name] = (passage.passages(model, p, t, q, v, start=False), len(counted))
+            runs[name] = (passage.passages(model, p, t, q, v, start=False), len(calls))
         finally:
-            passage.singular_ratio, tip.newton_tip = ratio, newton
+            setattr(module, attr, kept)
+            setattr(*counted, inner)
+    return t, runs
+
+
+@pytest.mark.parametrize("loops", [8, 32])
+def test_a02_passages_by_newton_are_the_ratios_minimum(loops):
+    """A02's two logged passages (rtol 1e-3): the instants the parabolic search on the
+    exact ratio finds (to 1e-9 of the interval), the ratio there bounded at round-off
+    without an exact ratio (twelve for the two by the parabolas)."""
+    from cmm_dae.simulation import passage
+    from cmm_dae.singular import tip
+
+    t, runs = _a02_passages(loops, (passage, "singular_ratio"), {
+        "newton": (tip, "newton_tip", None), "parabola": (tip, "newton_tip", lambda *a: None)})
     (by_newton, n_newton), (by_parabola, n_parabola) = runs["newton"], runs["parabola"]
     assert len(by_newton) == len(by_parabola) == 2
     for a, b in zip(by_newton, by_parabola, strict=True):
@@ -120,29 +135,11 @@ def test_newton_from_the_dip_sample_is_newton_from_the_grid(loops):
     succeeds): the same interval, the instant to 1e-10 of the interval (measured
     2.2e-14 to 1.1e-11: Newton stops at round-off, 4096 units of it at most), the ratio
     bounded at round-off, and no grid evaluated."""
-    import cmm_dae as cd
-    from cmm_dae.description import iftomm
     from cmm_dae.simulation import passage
 
-    mech = iftomm.a02_four_bar(loops)
-    model = cd.Model(mech)
-    res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
-    p, t, q, v = model.params(), res.t, res.data["q"], res.data["v"]
-    from_sample, on_grids = passage.sample_instant, passage._on_grids
-    grids: list[int] = []
-
-    def counting(*args):
-        grids.append(1)
-        return on_grids(*args)
-
-    runs = {}
-    for name, fn in (("sample", from_sample), ("grid", lambda *a: None)):
-        grids.clear()
-        passage.sample_instant, passage._on_grids = fn, counting
-        try:
-            runs[name] = (passage.passages(model, p, t, q, v, start=False), len(grids))
-        finally:
-            passage.sample_instant, passage._on_grids = from_sample, on_grids
+    t, runs = _a02_passages(loops, (passage, "_on_grids"), {
+        "sample": (passage, "sample_instant", None),
+        "grid": (passage, "sample_instant", lambda *a: None)})
     (by_sample, n_sample), (by_grid, n_grid) = runs["sample"], runs["grid"]
     assert len(by_sample) == len(by_grid) == 2
     for a, b in zip(by_sample, by_grid, strict=True):
