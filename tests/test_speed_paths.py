@@ -371,16 +371,18 @@ def test_collapsed_rows_from_the_gram_eigenpairs_are_the_svds():
     assert rank.collapsed_gram(J, 0.1 * rank.GRAM_FROM, float(s[0] ** 2)) is None
 
 
-def test_collapsed_rows_of_a_long_chain_by_block_inverse_iteration(monkeypatch):
-    """A02 with 32 loops (194 rows, from BLOCK_FROM on): at both singular instants the
-    rank drop (32) and the rows come from the Gram band's eigenvalues and a block inverse
-    iteration, without the dense eigensolver (made to fail here); the basis spans the
-    SVD's last 32 left singular vectors to 1e-8 and the labels are the SVD's."""
+@pytest.mark.parametrize("loops", [8, 32])
+def test_collapsed_rows_of_a_long_chain_by_block_inverse_iteration(monkeypatch, loops):
+    """A02 with 8 and 32 loops (50 and 194 rows, from BLOCK_FROM on): at both singular
+    instants the rank drop (the loops) and the rows come from the Gram band's eigenvalues
+    and a block inverse iteration, without the dense eigensolver (made to fail here); the
+    basis spans the SVD's last left singular vectors to 1e-8 and the labels are the
+    SVD's."""
     from cmm_dae.description import iftomm
     from cmm_dae.equations import kinematics, rank
     from cmm_dae.singular.instant import hermite
 
-    mech = iftomm.a02_four_bar(32)
+    mech = iftomm.a02_four_bar(loops)
     model = cd.Model(mech)
     res = cd.run_dae(mech, 2.0, rtol=1e-3, model=model)
     p = model.params()
@@ -404,8 +406,8 @@ def test_collapsed_rows_of_a_long_chain_by_block_inverse_iteration(monkeypatch):
             drop, basis = rank.collapsed_band(low, band.perm, lambda J=J: J, 0.01)
             assert kinematics.collapsed_rows(model, qs, e.t, p, 0.01) == (
                 drop, kinematics._row_labels(model, act, U, drop))
-        assert drop == rank.count_collapsed(s, 0.01) == 32
-        Uk = U[:, -32:]
+        assert drop == rank.count_collapsed(s, 0.01) == loops
+        Uk = U[:, -loops:]
         assert np.max(np.abs(Uk @ Uk.T - basis @ basis.T)) <= 1e-8
 
 
