@@ -273,6 +273,37 @@ def test_a_mechanism_run_again_reuses_its_model():
     assert len(cache._models) == cache.MODELS_KEPT
 
 
+def test_a_mechanism_changed_in_place_gets_a_new_model():
+    """What a user can still change in place in a frozen Mechanism, the mutable values
+    handed to it (a load's table given as lists, an array), is checked at every run: the
+    same content reuses the model, a changed value builds a new one; a mechanism of
+    immutable values alone has nothing to check."""
+    from cmm_dae.simulation import cache
+
+    times, values = [0.0, 0.5, 1.0], np.array([0.0, 1.0, 0.0])
+    base = four_bar_chain(1)
+    assert cache._mutable(base, []) == []
+    load = cd.Load("push", cd.Law("table", times=times, values=values),
+                   joint=next(iter(base.joints)))
+    mech = cd.Mechanism(base.name, base.bodies, base.joints, base.ground, base.drivers,
+                        base.initial, base.gravity, loads=[load])
+    built = []
+
+    def build(m):
+        built.append(m)
+        return cd.Model(m)
+
+    cache.clear()
+    first = cache.model_of(mech, build)
+    assert cache.model_of(mech, build) is first and len(built) == 1
+    values[1] = 2.0  # in place, in the middle of the array
+    assert cache.model_of(mech, build) is not first and len(built) == 2
+    second = cache.model_of(mech, build)
+    times[2] = 1.2  # the list
+    assert len(cache._mutable(mech, [])) == 2
+    assert cache.model_of(mech, build) is not second and len(built) == 3
+
+
 def test_block_diagonal_band_factors_are_each_states_own():
     """log det(J J^T) of many states from one banded Cholesky of their block-diagonal
     matrix: bit for bit what one LAPACK call per state on its block gives, also where
