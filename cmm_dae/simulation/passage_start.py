@@ -15,7 +15,7 @@ from ..equations.model import Model
 from ..singular.tip import ratio_above
 
 __all__ = ["START_RATIO", "SampleRatios", "dips", "end_may_dip", "predicted_start",
-           "shown_above", "start_before"]
+           "start_before"]
 
 #: The crossing starts from the last sample before the passage whose ratio is at least
 #: this (closer, the Gauss steps' nodes would sit where round-off rules the accelerations).
@@ -123,22 +123,12 @@ def dips(candidates: list[int], n: int, r, watch: float, exceeds=None, upper=Non
     return found
 
 
-def shown_above(model: Model, p: np.ndarray, t: float, q: np.ndarray, act: np.ndarray,
-                r: float) -> bool:
-    """Whether the constraints' singular-value ratio at (t, q) is shown above ``r`` by one
-    Cholesky factorization of their Gram band (:func:`~.bandsvd.above`: with 32 loops
-    instead of the ratio's 0.9 ms); False where it is not shown or not banded."""
-    band = gram_band(model, act) if 0 < act.size <= model.nq else None
-    if band is None:
-        return False
-    vals = active_values_at(model, act, q, t, p)
-    return bandsvd.above(banded.lower_blocks(band, vals[:, None]), r)
-
-
 class SampleRatios:
     """The exact ratios of a segment's samples (:mod:`.passage`), computed where they are
-    needed, and bounds on them by one Cholesky each: from below (:func:`shown_above`)
-    and from above (:func:`~cmm_dae.singular.tip.ratio_above`)."""
+    needed, and bounds on them by one Cholesky each: from below
+    (:func:`~cmm_dae.equations.bandsvd.above`) and from above
+    (:func:`~cmm_dae.singular.tip.ratio_above`), from one evaluation of the sample's
+    Jacobian nonzeros (a sample's bounds from both sides took two)."""
 
     def __init__(self, model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray,
                  act: np.ndarray, exact_only: bool):
@@ -150,6 +140,8 @@ class SampleRatios:
         self.shown: dict[int, float] = {}  # sample -> a bound its ratio is shown above
         self.bounds: dict[int, float] = {}  # sample -> a bound its ratio is below
         self.bounding = True  # until a bound did not spare its exact ratio
+        self.band = gram_band(model, act) if 0 < act.size <= model.nq else None
+        self._vals: dict[int, np.ndarray] = {}  # sample -> its active rows' nonzeros
 
     def r(self, i: int) -> float:
         """The exact ratio at sample i."""
@@ -175,25 +167,30 @@ class SampleRatios:
         got = self._bound(i)
         return self.r(i) if got is None else got
 
+    def _values(self, i: int) -> np.ndarray:
+        """The active rows' Jacobian nonzeros at sample i (kept)."""
+        if i not in self._vals:
+            self._vals[i] = active_values_at(self.model, self.act, self.q[i],
+                                             float(self.t[i]), self.p)
+        return self._vals[i]
+
     def _bound(self, i: int) -> float | None:
-        """:func:`~.tip.ratio_above` at sample i (kept), None where it cannot be had."""
-        if i not in self.bounds:
-            band = gram_band(self.model, self.act)
-            if band is None:
-                return None
-            vals = active_values_at(self.model, self.act, self.q[i], float(self.t[i]),
-                                    self.p)
-            got = ratio_above(vals, band, self.model.nq)
-            if got is None:
-                return None
-            self.bounds[i] = got
-        return self.bounds[i]
+        """:func:`~.tip.ratio_above` at sample i (kept), None where it cannot be had (no
+        band, or not factored)."""
+        if i not in self.bounds and self.band is not None:
+            got = ratio_above(self._values(i), self.band, self.model.nq)
+            if got is not None:
+                self.bounds[i] = got
+        return self.bounds.get(i)
 
     def _above(self, i: int, x: float) -> bool:
-        """Whether one Cholesky shows the ratio at sample i above x (kept: once each)."""
+        """Whether one Cholesky of the Gram band (:func:`~.bandsvd.above`: with 32 loops
+        instead of the ratio's 0.9 ms) shows the ratio at sample i above x (kept: once
+        each); False where it does not or there is no band."""
         if self.shown.get(i, -1.0) >= x:
             return True
-        if shown_above(self.model, self.p, float(self.t[i]), self.q[i], self.act, x):
+        if self.band is not None and bandsvd.above(
+                banded.lower_blocks(self.band, self._values(i)[:, None]), x):
             self.shown[i] = x
             return True
         return False
