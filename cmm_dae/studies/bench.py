@@ -22,14 +22,7 @@ from ..simulation.runner import simulate
 
 def best_time(fn, repeat: int) -> tuple[float, object]:
     """Best wall time of ``repeat`` warm runs (the first run warms caches and is dropped)."""
-    res = fn()
-    best = float("inf")
-    for _ in range(repeat):
-        gc.collect()
-        t = time.perf_counter()
-        res = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, res
+    return best_times([fn], repeat)[0]
 
 
 def best_times(fns: list, repeat: int) -> list[tuple[float, object]]:
