@@ -18,6 +18,7 @@ from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
 from ..equations import banded
+from ..equations.codegen import map_width
 from ..equations.kinematics import gram_band, gram_function
 from ..equations.kinematics import log_gram as banded_log_gram
 from ..equations.model import Model
@@ -32,10 +33,10 @@ CHUNK = 256
 def mapped_chunks(model: Model, name: str, p: np.ndarray, t: np.ndarray, q: np.ndarray):
     """``model.<name>`` (of q, t, p) over the samples in chunks of :data:`CHUNK`, one mapped
     evaluation each (the last chunk padded with its last sample, the padding dropped; fewer
-    samples than a chunk make a chunk of the next power of two, so that the maps built
-    stay few and the padding is less than the samples): yields (first sample, samples in
-    the chunk, the function's outputs)."""
-    size = min(CHUNK, 1 << max(t.size - 1, 1).bit_length())
+    samples than a chunk make a chunk of :func:`~cmm_dae.equations.codegen.map_width`'s
+    width, so that the maps built stay few): yields (first sample, samples in the chunk,
+    the function's outputs)."""
+    size = map_width(t.size, CHUNK)
     fn = model.mapped(name, size)
     P = np.repeat(p[:, None], size, axis=1)
     for k in range(0, t.size, size):
