@@ -121,13 +121,15 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
 
 def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
               values: np.ndarray | None = None,
-              triggers: list[Trigger] | None = None) -> list[Trigger]:
+              triggers: list[Trigger] | None = None,
+              lam: np.ndarray | None = None) -> list[Trigger]:
     """Triggers crossed at a state reached by a finite step (the fixed-step algorithm):
     those whose event function (:func:`event_values`, IDA's too) is negative there. A gap
     must be beyond its stop by more than round-off (a just-released joint sits a hair
     beyond it); a joint that stayed locked at this very instant is not reported again.
     ``values``: the event functions of ``triggers`` (default ``event_list(model,
-    hs.locked)``) at (q, v, t), when the caller has them already."""
+    hs.locked)``) at (q, v, t), when the caller has them already; ``lam``: the multipliers
+    there, when the caller solved them already."""
     model = hs.model
     if triggers is None:
         triggers = event_list(model, hs.locked)
@@ -136,7 +138,8 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
     if values is None:
         c, cd = model.joint_rates(q, v)
         needs_lam = any(tr.kind in (TK.PUSH, TK.SLIP) for tr in triggers)
-        lam = model.kkt(q, v, t, hs.p)[1] if needs_lam else None
+        if needs_lam and lam is None:
+            lam = model.kkt(q, v, t, hs.p)[1]
         values = np.empty(len(triggers))
         event_values(hs, c, cd, lam, triggers, values)
     out = []

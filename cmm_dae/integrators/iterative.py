@@ -197,18 +197,29 @@ class IterativeIntegrator(Integrator):
         self.n = max(self.n, int(np.floor(t / self.opts.dt + 1e-9)))
 
     def advance(self, t0: float, q: np.ndarray, v: np.ndarray, rec: Recorder) -> SegmentEnd:
-        model, hs, opts = self.model, self.hs, self.opts
+        model, hs = self.model, self.hs
         key = tuple(sorted(hs.locked.items()))
         if key != self.key or self.st is None:  # a new configuration: choose its coordinates
             self.coords = _free_coordinates(model, hs, q, t0, self.coords + self.prefer)
             self.st = _Stepper(model, hs, self.coords)
             self.key = key
-        st, k = self.st, self.st.kidx
-        cfg = hs.current()
         fast = self._compiled_step()
-        p = hs.p
-        t = t0
+        t, p = t0, hs.p
         a, _, _ = model.kkt(q, v, t, p)
+        kept: list[tuple[int, np.ndarray, np.ndarray]] = []
+        try:
+            return self._steps_from(t, q, v, a, rec, fast, kept)
+        finally:  # the Python step's KKT solves at the samples: post-processing reuses them
+            _keep_kkt(rec, kept)
+
+    def _steps_from(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                    rec: Recorder, fast: _CompiledStep | None,
+                    kept: list[tuple[int, np.ndarray, np.ndarray]]) -> SegmentEnd:
+        """The fixed steps of one configuration from (t, q, v, a) to its end or first
+        crossing; ``kept`` receives (sample index, a, lambda) of the samples whose
+        accelerations and multipliers the Python step solved."""
+        model, hs, opts, st = self.model, self.hs, self.opts, self.st
+        k, cfg, p = st.kidx, hs.current(), hs.p
         while self.n < self.n_steps:
             self.n += 1
             t_new = min(self.n * opts.dt, opts.t_end)
@@ -234,13 +245,20 @@ class IterativeIntegrator(Integrator):
             self.stats.steps += 1
             if opts.progress is not None:
                 opts.progress.update(t)
-            crossed = ev.crossings(hs, q, v, t, values, self.triggers)
+            # the Python step solves the KKT system at the new state once: for the event
+            # functions (friction), the next step and post-processing (it was solved twice
+            # a step, a third of a fixed-step run of a pin with reaction friction)
+            sol = model.kkt(q, v, t, p) if a_new is None else None
+            crossed = ev.crossings(hs, q, v, t, values, self.triggers,
+                                   lam=None if sol is None else sol[1])
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch
                 return SegmentEnd(t, q, v, tuple(crossed), "event")
-            a = a_new if a_new is not None else model.kkt(q, v, t, p)[0]
+            a = a_new if sol is None else sol[0]
             if self.n % opts.output_every == 0 or self.n == self.n_steps:
                 rec.add(t, q, v, cfg)
+                if sol is not None:
+                    kept.append((len(rec) - 1, sol[0], sol[1]))
         return SegmentEnd(t, q, v, (), "end")
 
 
@@ -256,6 +274,19 @@ class IterativeIntegrator(Integrator):
         if got is None:
             got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)
         return got
+
+
+def _keep_kkt(rec: Recorder, kept: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+    """Hand the recorder the kept (index, a, lambda) of samples, one block per run of
+    consecutive indices (the compiled step's samples, solved in C without multipliers,
+    leave gaps that post-processing fills)."""
+    if not kept:
+        return
+    idx = np.array([i for i, _, _ in kept])
+    cuts = np.flatnonzero(np.diff(idx) != 1) + 1
+    for lo, hi in zip([0, *cuts], [*cuts, idx.size], strict=True):
+        rec.keep_kkt(int(idx[lo]), np.array([x[1] for x in kept[lo:hi]]),
+                     np.array([x[2] for x in kept[lo:hi]]))
 
 
 def steps_needed(t_end: float, dt: float) -> int:

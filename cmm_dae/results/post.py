@@ -65,10 +65,13 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     ``solved``: their accelerations and multipliers where the run solved them already
     (NaN where it did not: then the chunk's are solved here)."""
     n = t.size
-    if solved is not None and np.isfinite(solved[0]).all() and np.isfinite(solved[1]).all():
-        a, lam = solved
-    else:
+    if solved is None:
         a, lam = batch_kkt(model, t, q, v, P)
+    else:  # solved here only where the run did not (each sample's solve is its own)
+        a, lam = solved[0].copy(), solved[1].copy()
+        lack = ~(np.isfinite(a).all(axis=1) & np.isfinite(lam).all(axis=1))
+        if lack.any():
+            a[lack], lam[lack] = batch_kkt(model, t[lack], q[lack], v[lack], P[lack])
     outputs.series_function(model)  # (model.series_fn, built on first use)
     c, cd, cdd, *extras, phi, hvel = (
         np.asarray(x).reshape(-1, n).T
