@@ -12,6 +12,7 @@ Tolerances are stated at each assertion.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -521,3 +522,76 @@ def test_post_processing_chunks_pad_at_most_a_quarter():
     assert len([w for w in widths if 1024 < w <= 2048]) == 4
     k, idx = chunk_indices(128, 201, 64)  # a full chunk keeps the chunk size
     assert k == 64 and np.array_equal(idx, np.arange(128, 192))
+
+
+def test_recent_keeps_the_last_keys_of_a_kind():
+    """core.memo.recent: a key asked again is not computed again, a kind keeps its last
+    ``keep`` keys (the least recently asked goes first), kinds are apart."""
+    from types import SimpleNamespace
+
+    from cmm_dae.core.memo import recent
+
+    owner, calls = SimpleNamespace(), []
+
+    def get(kind, key):
+        return recent(owner, kind, key, lambda: calls.append(key) or [key], keep=2)
+    first = get("a", 1)
+    assert get("a", 1) is first and calls == [1]
+    get("a", 2)
+    get("a", 1)  # 1 asked last: 2 goes when 3 comes
+    get("a", 3)
+    assert get("a", 1) is first and calls == [1, 2, 3]
+    get("a", 2)
+    assert calls == [1, 2, 3, 2] and get("b", 1) == [1] and calls[-1] == 1
+
+
+def test_a_run_from_a_kept_start_is_the_same(monkeypatch):
+    """The first segment's projection and KKT solve are kept per model and start: the
+    model run again from the same start projects nothing anew and gives the same numbers
+    bit for bit (the returned arrays are copies: the run changing them leaves the kept
+    ones), a start changed in the mechanism is projected anew (A02 with 8 loops)."""
+    from cmm_dae.description import iftomm
+    from cmm_dae.integrators import ida_steps
+
+    projected = []
+    project = ida_steps.project_state
+    monkeypatch.setattr(ida_steps, "project_state",
+                        lambda *a, **k: projected.append(a[3]) or project(*a, **k))
+    mech = iftomm.a02_four_bar(8)
+    model = cd.Model(mech)
+    first = cd.run_dae(mech, 0.5, rtol=1e-6, model=model)
+    n = len(projected)
+    assert n >= 1 and projected[0] == 0.0
+    again = cd.run_dae(mech, 0.5, rtol=1e-6, model=model)
+    assert len(projected) == 2 * n - 1  # all but the first segment's start
+    for key in ("q", "v", "a", "lam", "jforce", "effort"):
+        assert np.array_equal(first.data[key], again.data[key]), key
+    moved = mech.replace(initial=dataclasses.replace(
+        mech.initial, velocities={**mech.initial.velocities, "G0": 0.5}))
+    other = cd.run_dae(moved, 0.5, rtol=1e-6)
+    assert projected[2 * n - 1] == 0.0 and not np.array_equal(other.data["v"][0],
+                                                              first.data["v"][0])
+
+
+def test_iterative_python_step_hands_its_solves_to_post_processing(monkeypatch):
+    """The fixed-step algorithm's Python step (friction from the reaction) solves the KKT
+    system once a step and the run keeps it at the samples: post-processing solves only
+    the samples without one (those just before a switch), and every series is bit for
+    bit what its own solve gives (a pin with reaction friction, 0.8 s at dt 1e-3: slips
+    and sticks)."""
+    from test_reaction_friction import _pin_pendulum
+
+    from cmm_dae.integrators import contract
+
+    solved = []
+    batch = post.batch_kkt
+    monkeypatch.setattr(post, "batch_kkt", lambda *a: solved.append(a[1].size) or batch(*a))
+    mech = _pin_pendulum()
+    kept = cd.run_iterative(mech, 0.8, dt=1e-3)
+    assert kept.events and sum(solved) <= 2 * len(kept.events) + 1 and kept.t.size > 700
+    solved.clear()
+    monkeypatch.setattr(contract.Recorder, "kkt", lambda self, *a: None)
+    own = cd.run_iterative(mech, 0.8, dt=1e-3)
+    assert sum(solved) >= own.t.size  # (its own solve of every sample, padded)
+    for key in ("a", "lam", "jforce", "jtorque", "friction"):
+        assert np.array_equal(kept.data[key], own.data[key]), key

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable, Hashable
 from typing import Any
 
-__all__ = ["once"]
+__all__ = ["once", "recent"]
 
 
 def once(owner: Any, key: Hashable, compute: Callable[[], Any]) -> Any:
@@ -17,3 +17,18 @@ def once(owner: Any, key: Hashable, compute: Callable[[], Any]) -> Any:
     if key not in cache:
         cache[key] = compute()
     return cache[key]
+
+
+def recent(owner: Any, kind: str, key: Hashable, compute: Callable[[], Any],
+           keep: int = 4) -> Any:
+    """``compute()`` unless ``key`` is one of the last ``keep`` keys of ``kind`` that
+    ``owner`` was asked for: for values keyed by a state (a run's start), which a sweep
+    over starts would otherwise pile up without bound."""
+    cache = owner.__dict__.setdefault("_recent", {}).setdefault(kind, {})
+    if key in cache:
+        cache[key] = cache.pop(key)  # (the most recent last)
+        return cache[key]
+    value = cache[key] = compute()
+    while len(cache) > keep:
+        del cache[next(iter(cache))]
+    return value

@@ -12,6 +12,7 @@ from types import MappingProxyType
 from typing import Literal
 
 from ..core.errors import ModelError, Problem
+from ..core.memo import once
 from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
 from .curves import spline
 from .laws import Driver, Law, Zone
@@ -322,7 +323,9 @@ class Mechanism:
     def limited_joints(self) -> list[str]:
         """Names of the joints with stops (the metamorphic joints: limits, unilateral
         contacts), in file order."""
-        return [n for n, j in self.joints.items() if j.stops is not None]
+        # (a frozen mechanism's: found once, 0.17 ms with 145 joints, asked at every run)
+        return list(once(self, ("limited joints",),
+                         lambda: [n for n, j in self.joints.items() if j.stops is not None]))
 
     @property
     def lockable_joints(self) -> list[str]:

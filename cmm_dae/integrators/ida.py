@@ -22,7 +22,7 @@ import sksundae as sun
 from ..core.errors import CmmError, SolverError, Status
 from ..core.memo import once
 from ..core.records import Stats
-from ..equations.kinematics import project_state, singular_ratio
+from ..equations.kinematics import singular_ratio
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
@@ -36,10 +36,11 @@ from .ida_steps import (
     _StalledError,
     failure,
     quiet_sundials,
+    segment_start,
     segment_times,
     sparse_solver,
 )
-from .tolerances import ATOL_LAMBDA, lambda_atol, lambda_scale, tolerances
+from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
 
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
 #: zero than this share of the largest multiplier (plus 100 ATOL_LAMBDA); nearer, from a KKT
@@ -273,13 +274,10 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
         # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
-        q, v = project_state(model, q, v, t0, self.p)
-        a, lam, Phi_q = model.kkt(q, v, t0, self.p)
-        if not self._scaled:  # the run's first segment: its force scale (the event
-            # functions' lock forces are measured in it), from this solve
-            self.lambda_scale, self._scaled = lambda_scale(model, self.p, t0, q, v,
-                                                           (a, lam, Phi_q)), True
-            self._lambda_atol()
+        q, v, a, lam, scale = segment_start(model, q, v, t0, self.p, first=not self._scaled)
+        if scale is not None:  # the run's first segment: its force scale (the event
+            self.lambda_scale, self._scaled = scale, True  # functions' lock forces are
+            self._lambda_atol()  # measured in it)
         trig = self.triggers = ev.event_list(model, hs.locked)
         self.push_idx = np.flatnonzero([tr.kind in ev.LOCK_FORCES for tr in trig])
         self.has_push = self.push_idx.size > 0
