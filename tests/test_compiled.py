@@ -9,6 +9,8 @@ series' units) are the issue's acceptance figures; measured differences are far 
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -350,9 +352,11 @@ def test_a_large_model_compiles_its_segment_alone():
     outs = compiled.instructions(model)
     assert 0 < outs <= compiled.OUTPUTS_BUDGET
     u = model.ida
-    assert cbuild.build_estimate(model) == pytest.approx(
-        0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
-        + 0.2 + 2.5e-4 * outs)
+    seg = 0.1 + 2.5e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
+    post = 0.2 + 3e-4 * outs
+    assert post > 0.3 and seg > 0.3
+    assert cbuild.build_estimate(model) == pytest.approx(max(seg, post) if (
+        os.cpu_count() or 1) > 1 else seg + post)
     assert compiled.use_compiled(model) and model.outputs_compiled
     assert all(getattr(model, attr).is_a("External") for attr in compiled.BANDED)
     b = cd.run_dae(model.mech, 1.0, rtol=1e-3, compiled=False, model=model)

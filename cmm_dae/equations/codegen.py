@@ -169,7 +169,11 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
     tmp = lib.with_suffix(f".{_builder()}.tmp")
     stamp_tmp = lib.with_suffix(f".{_builder()}.ok.tmp")
     try:
-        subprocess.run([*cc, "-O2", "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
+        # CasADi's generated code (straight-line arithmetic) at -O1: A02 with 32 loops
+        # built in 13.7 s instead of 25.9 s, its segment and post-processing as fast
+        # (15.24 ms a 2-s run's segments either way); hand-written C at -O2
+        opt = "-O1" if funcs else "-O2"
+        subprocess.run([*cc, opt, "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
                        check=True, capture_output=True, timeout=600)
         stamp_tmp.write_text(f"{key} {tmp.stat().st_size} {_digest(tmp)}\n")
         # the stamp first, then the library, each atomic: a process that finds the

@@ -111,10 +111,11 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> csegment.CompiledMod
 
 #: compiled="auto" builds a mechanism's segment before its first run where the build is
 #: estimated (:func:`build_estimate`) to take at most this (s), once per machine and
-#: mechanism, then cached: the shipped models but one (0.5-3.4 s; the curved slot 6.4 s),
-#: A02 with 1, 8 and 16 loops (1.1, 2.2, 3.9 s; first runs with the build measured 1.2
-#: and 2.1 s with 1 and 8). A02 with 32 loops (7.4 s) runs in Python until its runs took
-#: long enough together (:data:`AUTO_BUILD_AFTER`).
+#: mechanism, then cached: the shipped models but one (estimated 0.3-3.3 s; the curved
+#: slot 5.3 s), A02 with 1 to 32 loops (0.8, 1.1, 2.1, 3.6 s for 1, 8, 16, 32; the
+#: build measured 0.76, 1.6 and 5.5 s with 8, 16 and 32 loops on a busy machine, where
+#: gcc -O2 one library after the other took 3.3, 4.7 and 14.1 s). Larger ones run in
+#: Python until their runs took long enough together (:data:`AUTO_BUILD_AFTER`).
 AUTO_BUILD_NOW = 4.0
 
 
@@ -134,12 +135,16 @@ _spent: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> s in
 
 
 def build_estimate(model: Model) -> float:
-    """Seconds to build ``model``'s compiled segment from its CasADi instructions (gcc -O2:
-    residual and Jacobian 0.28-0.64 s for 1,500-3,500, 4.4 s for 13,900; post-processing's
-    library, where built, 0.75-2.9 s for 3,600-11,300)."""
+    """Seconds to build ``model``'s compiled segment from its CasADi instructions, gcc -O1
+    (measured on a busy 2-core machine, residual and Jacobian: 0.17-0.63 s for
+    500-3,500, 1.5 s for 7,000, 3.9 s for 13,900, 3.7 s for 20,700; post-processing's
+    library, where built: 0.3-0.9 s up to 3,600, 1.9-2.5 s for 8,800-10,200, 1.6 and 5.4 s
+    for A02 with 16 and 32 loops' 5,800 and 11,400). The two libraries compile at once
+    where the machine has two cores or more."""
     u, outs = model.ida, compiled.instructions(model)
-    return 0.2 + 3e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions()) + \
-        (0.2 + 2.5e-4 * outs if outs <= compiled.OUTPUTS_BUDGET else 0.0)
+    seg = 0.1 + 2.5e-4 * (u.res_sx.n_instructions() + u.jac_sparse_fn.n_instructions())
+    post = 0.2 + 3e-4 * outs if outs <= compiled.OUTPUTS_BUDGET else 0.0
+    return max(seg, post) if (os.cpu_count() or 1) > 1 else seg + post
 
 
 def build_later(model: Model, sparse: bool, mode: bool | str, used: csegment.CompiledModel | None,
