@@ -310,7 +310,8 @@ def test_block_diagonal_band_factors_are_each_states_own():
     matrix: bit for bit what one LAPACK call per state on its block gives, also where
     states in the middle are singular (-inf there, the states after them factored on),
     and a dense log det of J J^T to 1e-12; the multipliers of many
-    samples from one banded Cholesky, and from the LU that takes over where rows are free:
+    samples from one banded Cholesky, and from the LU that takes over where rows are free
+    (one to four states' blocks, summed one by one, bit for bit those of many):
     those of a dense solve of each sample's Schur complement to 1e-12 of their largest.
     A02 with 8 loops, its run's samples."""
     from scipy.linalg.lapack import dpbtrf
@@ -339,6 +340,9 @@ def test_block_diagonal_band_factors_are_each_states_own():
         dense.append(logdet if sign > 0 else -np.inf)
     got = kinematics.log_gram(model, act, nz)
     assert np.array_equal(got, np.array(one_by_one))
+    for k in (1, 2, 4):  # a few states summed one by one: the same bits
+        assert np.array_equal(banded.lower_blocks(band, nz[kinematics._csc_index(
+            model, act)][:, 30:30 + k]), blocks[:, 30 * band.m:(30 + k) * band.m])
     assert np.isneginf(got[[7, 20, n - 1]]).all() and np.isfinite(got[8])
     ok, dense = np.isfinite(got), np.array(dense)
     assert np.array_equal(ok, np.isfinite(dense))

@@ -98,11 +98,17 @@ def lower_blocks(st: BandedSchur, vals: np.ndarray, scale: np.ndarray | None = N
     if scale is not None:
         prod *= scale[st.lk][:, None]
     n = vals.shape[1]
+    size = (st.bw + 1) * st.m
     if n == 1:  # one state (a singular instant, a bound): a sparse product's dispatch
         # cost more than the sum (in the same order: the same bits)
-        low = np.bincount(st.dest, weights=prod[:, 0], minlength=(st.bw + 1) * st.m)
-        return low.reshape(st.m, st.bw + 1).T
-    low = st.to_lower @ prod  # ((bw + 1) m, states): summed into S's entries
+        return np.bincount(st.dest, weights=prod[:, 0], minlength=size).reshape(
+            st.m, st.bw + 1).T
+    if n <= 4:  # a few (a short run's samples): the same sums state by state (0.18 ->
+        # 0.04 ms for two states with 32 loops)
+        low = np.stack([np.bincount(st.dest, weights=prod[:, k], minlength=size)
+                        for k in range(n)], axis=1)
+    else:
+        low = st.to_lower @ prod  # ((bw + 1) m, states): summed into S's entries
     return np.ascontiguousarray(low.T).reshape(n * st.m, st.bw + 1).T
 
 

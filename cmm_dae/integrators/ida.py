@@ -87,11 +87,12 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         #: the compiled segment, or None for the Python path (cbuild.choose)
         self.c = cbuild.choose(model, self.sparse, opts.compiled)
         self.ls_options: dict = {}
-        if self.sparse:
-            colind, row = u.jac_pattern.get_ccs()
-            self.ls_options = {"linsolver": "sparse", "sparsity": sp.csc_matrix(
-                (np.ones(len(row)), np.asarray(row, np.int32), np.asarray(colind, np.int32)),
-                shape=(u.N, u.N))}
+        if self.sparse:  # (the pattern as scipy's: once per model, 0.2 ms with 32 loops)
+            self.ls_options = {"linsolver": "sparse", "sparsity": once(
+                model, ("ida sparsity",), lambda: sp.csc_matrix(
+                    (np.ones(u.jac_pattern.nnz()), *(np.asarray(x, np.int32) for x in
+                                                     u.jac_pattern.get_ccs()[::-1])),
+                    shape=(u.N, u.N)))}
         self.tol_scale, self.rtol, self.atol = tolerances(u, opts.rtol, opts.atol)
         #: factor on the multipliers' absolute tolerances, from the forces at the start
         #: (set by the first segment)
