@@ -49,10 +49,12 @@ class BandedSchur:
     dest: np.ndarray      # (nlow,) each product's row in to_lower (its entry's flat index)
 
 
-def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
+def structure(rows: np.ndarray, cols: np.ndarray, m: int, limited: bool = True
+              ) -> BandedSchur | None:
     """The banded structure of ``S`` for Phi_q's nonzeros at (rows, cols), or None when the
-    system is small or its band is not narrow (then the dense batched solve is better)."""
-    if m < BANDED_FROM:
+    system is small or its band is not narrow (then the dense batched solve is better);
+    ``limited=False``: at any size and width (a small system's band is the whole matrix)."""
+    if limited and m < BANDED_FROM:
         return None
     pa, pb = [], []
     by_col: dict[int, list[int]] = {}
@@ -71,7 +73,7 @@ def structure(rows: np.ndarray, cols: np.ndarray, m: int) -> BandedSchur | None:
     inv[perm] = np.arange(m)
     i, j = inv[ra], inv[rb]
     bw = int(np.max(np.abs(i - j), initial=0))
-    if bw > BAND_SHARE * m:
+    if limited and bw > BAND_SHARE * m:
         return None
     # the products on or below the diagonal (S is symmetric: LAPACK's lower band storage
     # holds it), A[i, j] at row i - j of column j of a (bw + 1, m) Fortran array

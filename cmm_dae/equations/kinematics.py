@@ -116,12 +116,12 @@ def _augmented_lu(J: np.ndarray, nonzeros: tuple[np.ndarray, np.ndarray] | None 
 _STRUCTURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def active_nonzeros(model: Model, act: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The structural nonzeros (rows, columns; row-major) of the active rows ``act`` of a
-    large model's Phi_q, from its CasADi pattern, kept per model and row set (None below
-    :data:`banded.BANDED_FROM` rows): finding them in the dense matrix took 4.3 of 25 s on A02
-    with 64 loops."""
-    if act.size < banded.BANDED_FROM:
+def active_nonzeros(model: Model, act: np.ndarray, every: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The structural nonzeros (rows, columns; row-major) of Phi_q's active rows ``act``
+    from its pattern, kept per model and row set (None below :data:`banded.BANDED_FROM`
+    rows unless ``every``): the dense matrix's took 4.3 of 25 s on A02 with 64 loops."""
+    if act.size < banded.BANDED_FROM and not every:
         return None
     per_model = _STRUCTURES.setdefault(model, {})
     key = act.tobytes()
