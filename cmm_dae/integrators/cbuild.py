@@ -112,7 +112,7 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> csegment.CompiledMod
 #: compiled="auto" builds a mechanism's segment before its first run where the build is
 #: estimated (:func:`build_estimate`) to take at most this (s), once per machine and
 #: mechanism, then cached: the shipped models but one (estimated 0.3-3.3 s; the curved
-#: slot 5.3 s), A02 with 1 to 32 loops (0.8, 1.1, 2.1, 3.6 s for 1, 8, 16, 32; the
+#: slot 5.3 s), A02 with 1 to 32 loops (estimated 0.85, 1.1, 1.9, 3.6 s for 1, 8, 16, 32; the
 #: build measured 0.76, 1.6 and 5.5-5.7 s with 8, 16 and 32 loops on a busy machine, where
 #: gcc -O2 one library after the other took 3.3, 4.7 and 13.9-14.3 s). Larger ones run in
 #: Python until their runs took long enough together (:data:`AUTO_BUILD_AFTER`).
