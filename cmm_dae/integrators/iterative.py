@@ -248,13 +248,14 @@ class IterativeIntegrator(Integrator):
             # the Python step solves the KKT system at the new state once: for the event
             # functions (friction), the next step and post-processing (it was solved twice
             # a step, a third of a fixed-step run of a pin with reaction friction)
-            sol = model.kkt(q, v, t, p) if a_new is None else None
+            sol = _solved(model, q, v, t, p) if a_new is None else None
             crossed = ev.crossings(hs, q, v, t, values, self.triggers,
                                    lam=None if sol is None else sol[1])
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch
                 return SegmentEnd(t, q, v, tuple(crossed), "event")
-            a = a_new if sol is None else sol[0]
+            a = a_new if a_new is not None else (
+                sol[0] if sol is not None else model.kkt(q, v, t, p)[0])
             if self.n % opts.output_every == 0 or self.n == self.n_steps:
                 rec.add(t, q, v, cfg)
                 if sol is not None:
@@ -274,6 +275,17 @@ class IterativeIntegrator(Integrator):
         if got is None:
             got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)
         return got
+
+
+def _solved(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
+            ) -> tuple | None:
+    """The KKT solve at a step's end; None where it is singular (the event functions, or
+    the next step, ask for it again and say so, as where it was solved there alone: a
+    crossing found without the multipliers still ends the step)."""
+    try:
+        return model.kkt(q, v, t, p)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def _keep_kkt(rec: Recorder, kept: list[tuple[int, np.ndarray, np.ndarray]]) -> None:

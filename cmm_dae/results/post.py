@@ -67,11 +67,14 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
     n = t.size
     if solved is None:
         a, lam = batch_kkt(model, t, q, v, P)
-    else:  # solved here only where the run did not (each sample's solve is its own)
+    else:  # solved here only where the run did not (each sample's solve is its own),
+        # padded to a width the maps are built for (not one map per count of them)
         a, lam = solved[0].copy(), solved[1].copy()
-        lack = ~(np.isfinite(a).all(axis=1) & np.isfinite(lam).all(axis=1))
-        if lack.any():
-            a[lack], lam[lack] = batch_kkt(model, t[lack], q[lack], v[lack], P[lack])
+        lack = np.flatnonzero(~(np.isfinite(a).all(axis=1) & np.isfinite(lam).all(axis=1)))
+        if lack.size:
+            at = np.concatenate([lack, np.full(map_width(lack.size, n) - lack.size, lack[-1])])
+            got = batch_kkt(model, t[at], q[at], v[at], P[at])
+            a[lack], lam[lack] = got[0][:lack.size], got[1][:lack.size]
     outputs.series_function(model)  # (model.series_fn, built on first use)
     c, cd, cdd, *extras, phi, hvel = (
         np.asarray(x).reshape(-1, n).T
