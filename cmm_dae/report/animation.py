@@ -18,17 +18,14 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import matplotlib
+import numpy as np
+from PIL import Image  # (matplotlib's own dependency)
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from PIL import Image  # noqa: E402  (matplotlib's own dependency)
-
-from ..core.errors import CmmError  # noqa: E402
-from ..description.curves import spline  # noqa: E402
-from ..description.parts import Curve  # noqa: E402
-from ..equations.gearing import pinion_radius, pitch_radius  # noqa: E402
+from ..core.errors import CmmError
+from ..description.curves import spline
+from ..description.parts import Curve
+from ..equations.gearing import pinion_radius, pitch_radius
+from .plots import pyplot
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..results.result import Result
@@ -190,7 +187,7 @@ class _Scene:
     def figure(self):
         """The figure, and ``update(k)`` moving every artist to frame ``k``."""
         res, lay = self.res, self.res.layout
-        fig, ax = plt.subplots(figsize=(7.0, 5.0))
+        fig, ax = pyplot().subplots(figsize=(7.0, 5.0))
         pad = 0.1 * self.size
         ax.set_xlim(self.lo[0] - pad, self.hi[0] + pad)
         ax.set_ylim(self.lo[1] - pad, self.hi[1] + pad)
@@ -263,7 +260,7 @@ def _frames(res: Result, max_frames: int, dpi: int):
                 fig.draw_artist(art)
             yield np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     finally:
-        plt.close(fig)
+        pyplot().close(fig)
 
 
 def gif_path(path: str | Path, key: str = "path") -> Path:

@@ -7,20 +7,26 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import matplotlib
-import matplotlib.ticker
-import matplotlib.transforms
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..results.result import Result  # noqa: E402
+from ..results.result import Result
 
 if TYPE_CHECKING:  # pragma: no cover
     from .compare import Comparison
 
 STYLE = {0: dict(color="tab:blue", lw=1.6), 1: dict(color="tab:red", lw=1.0, ls="--")}
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (files, no window), imported when a figure
+    is first drawn: at module level it took 0.5 s of every ``import cmm_dae``, and so of
+    every command-line call."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def _label(res: Result) -> str:
@@ -43,6 +49,7 @@ def _stacked(results: list[Result], names: list[str], series, labels, height: fl
     """One panel per name, every result on it: ``series(result, name)`` against time;
     ``labels(name)`` gives (ylabel, title)."""
     r0 = results[0]
+    plt = pyplot()
     fig, axes = plt.subplots(len(names), 1, figsize=(8, height * len(names)), squeeze=False)
     for ax, name in zip(axes[:, 0], names, strict=True):
         for k, r in enumerate(results):
@@ -83,6 +90,7 @@ def joint_motion(results: list[Result], joints: list[str], path: Path) -> Path:
 def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
     """Constraint force components and torque of one joint vs time (paper Figs. 18-19)."""
     r0 = results[0]
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
     comps = [("force x [N]", lambda j: j.force[:, 0]), ("force y [N]", lambda j: j.force[:, 1]),
              ("torque [N m]", lambda j: j.torque)]
@@ -119,6 +127,7 @@ def differences(cmp: Comparison, path: Path) -> Path:
 
     names = [("driver", n) for n in a.layout.drivers] + \
         [("joint", n) for n in a.watched_joints()]  # never empty: watched falls back to all
+    plt = pyplot()
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.6 * max(1, len(names))),
                              squeeze=False, sharex=True)
     for ax, (kind, n) in zip(axes[:, 0], names, strict=True):
@@ -151,6 +160,7 @@ def timeline(results: list[Result], path: Path) -> Path:
             txt = c.describe()
             if txt not in labels:
                 labels.append(txt)
+    plt = pyplot()
     colors = plt.cm.tab10(np.arange(len(labels)) % 10)
     fig, ax = plt.subplots(figsize=(9, 1.2 + 0.7 * len(results)))
     for row, r in enumerate(results):
@@ -169,6 +179,7 @@ def timeline(results: list[Result], path: Path) -> Path:
     handles = [plt.Rectangle((0, 0), 1, 1, color=colors[i]) for i in range(len(labels))]
     # below the time axis and its label, whatever the band's height (a fixed fraction of
     # the axes put it over the label on one-run timelines)
+    import matplotlib.transforms
     below = matplotlib.transforms.offset_copy(ax.transAxes, fig=fig, y=-34, units="points")
     ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
               bbox_transform=below, ncol=min(3, len(labels)), fontsize=8)
@@ -202,6 +213,7 @@ def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
 def work_precision(rows: list, path: Path, title: str) -> Path:
     """Error vs wall time, one line per method (rows of a
     :class:`~cmm_dae.studies.WorkPrecision`; failed or exact runs are left out)."""
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 5))
     for k, method in enumerate(dict.fromkeys(r.method for r in rows)):
         pts = [r for r in rows if r.method == method and np.isfinite(r.error) and r.error > 0]
@@ -212,6 +224,7 @@ def work_precision(rows: list, path: Path, title: str) -> Path:
         for p in pts:
             ax.annotate(p.setting, (p.wall, p.error), fontsize=7,
                         textcoords="offset points", xytext=(4, 4))
+    import matplotlib.ticker
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set(xlabel="wall time [s]", ylabel="max driving-effort error [N m]")
     ax.set_title(title, fontsize=10)
