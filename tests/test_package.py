@@ -210,8 +210,8 @@ def test_importing_the_package_draws_in_no_plotting_library(tmp_path):
     still works, on the Agg backend."""
     code = ("import sys, cmm_dae\n"
             "print('matplotlib' in sys.modules)\n"
-            "from cmm_dae.report import plots\n"
-            "plt = plots.pyplot()\n"
+            "from cmm_dae.core.figures import pyplot\n"
+            "plt = pyplot()\n"
             "print(plt.get_backend().lower())\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          cwd=tmp_path, timeout=120)

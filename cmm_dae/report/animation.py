@@ -22,10 +22,10 @@ import numpy as np
 from PIL import Image  # (matplotlib's own dependency)
 
 from ..core.errors import CmmError
+from ..core.figures import pyplot
 from ..description.curves import spline
 from ..description.parts import Curve
 from ..equations.gearing import pinion_radius, pitch_radius
-from .plots import pyplot
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..results.result import Result

@@ -9,24 +9,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.figures import pyplot
 from ..results.result import Result
 
 if TYPE_CHECKING:  # pragma: no cover
     from .compare import Comparison
 
 STYLE = {0: dict(color="tab:blue", lw=1.6), 1: dict(color="tab:red", lw=1.0, ls="--")}
-
-
-def pyplot():
-    """matplotlib's pyplot on the Agg backend (files, no window), imported when a figure
-    is first drawn: at module level it took 0.5 s of every ``import cmm_dae``, and so of
-    every command-line call."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _label(res: Result) -> str:

@@ -264,7 +264,7 @@ def _march(st: Start, plan: Plan, t_end: float, rtol: float, atol: float) -> tup
 
 def _arrive(st: Start, plan: Plan, tt: float, qq: np.ndarray, vv: np.ndarray,
             taken: list[float], ends: list, dk: list, switched: bool, t_end: float,
-            t_min: float, rtol: float = 1e-8) -> Crossing:
+            t_min: float, rtol: float) -> Crossing:
     """The state after the crossing projected and checked (the motion went on: the
     constraints close, the velocities did not jump, the ratio recovered), the rank drop
     and the instant located along the Gauss steps: the :class:`Crossing`. ``dk``: the

@@ -30,7 +30,7 @@ from scipy.linalg.lapack import dpbtrs
 
 from ..core.memo import once
 from ..equations import banded
-from ..equations.kinematics import active_nonzeros, active_values_at
+from ..equations.kinematics import active_nonzeros, active_values_at, gram_band
 from ..equations.model import Model
 from .instant import grid_bracket, hermite, interval_minimum
 
@@ -69,10 +69,13 @@ ITERATIONS = 2
 
 
 def tip_band(model: Model, act: np.ndarray) -> banded.BandedSchur:
-    """The banded structure of the active rows' Gram matrix at any size and width (a small
-    system's band is the whole matrix: a single loop's instant by Newton's method too, not
-    on grids of exact ratios, 2.6 of 7.1 ms a 2-s run of A02 with one loop), kept per
-    model and row set."""
+    """The banded structure of the active rows' Gram matrix (:func:`gram_band`'s, where it
+    has one), else at any size and width (a small system's band is the whole matrix: a
+    single loop's instant by Newton's method too, not on grids of exact ratios, 2.6 of
+    7.1 ms a 2-s run of A02 with one loop), kept per model and row set."""
+    band = gram_band(model, act)
+    if band is not None:
+        return band
     return once(model, ("tip band", act.tobytes()), lambda: banded.structure(
         *active_nonzeros(model, act, every=True), act.size, limited=False))
 

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..core.errors import CmmError, ModelError, Problem
+from ..core.figures import pyplot
 from ..description.mechanism import Mechanism
 from ..description.params import param_value, with_params
 from ..description.writer import write_model
@@ -124,11 +125,7 @@ class Design:
         """Write summary.md (tables before and after, event tables, the optimiser's
         history), effort.png (driving effort before and after), history.png and the
         optimised model file into ``out_dir``; returns the summary's path."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
+        plt = pyplot()
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         files = [out / n for n in REPORT_FILES]
