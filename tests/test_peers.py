@@ -129,7 +129,8 @@ def test_without_exudyn_the_error_says_how_to_get_it(monkeypatch):
 
 def test_side_by_side_timings_alternate():
     """The codes compared run in turn (a slow spell of a shared machine falls on both),
-    each warmed once first; each gets its best time and its last result."""
+    each warmed once first; each gets its best time and its last result; a None is
+    left out."""
     from cmm_dae.studies.bench import best_times
 
     order: list[str] = []
@@ -138,3 +139,8 @@ def test_side_by_side_timings_alternate():
     assert order == ["a", "b"] * 4
     assert [r for _, r in got] == [7, -8]
     assert all(0.0 <= t < 1.0 for t, _ in got)
+    # nothing to time (no cmm_dae setting matches the peer): (nan, None), the rest timed
+    order.clear()
+    (t_a, r_a), (t_none, r_none) = best_times([lambda: order.append("a") or 1, None], 2)
+    assert order == ["a"] * 3 and r_a == 1 and 0.0 <= t_a < 1.0
+    assert math.isnan(t_none) and r_none is None

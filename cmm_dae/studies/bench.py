@@ -29,11 +29,14 @@ def best_times(fns: list, repeat: int) -> list[tuple[float, object]]:
     """:func:`best_time` of several functions side by side: each warmed once, then
     ``repeat`` rounds in which each runs once in turn, so that a slow spell of a shared
     machine falls on all of them (timed one after the other, a spell had moved a ratio
-    by a third): (best wall time, last result) of each."""
-    res = [fn() for fn in fns]
-    best = [float("inf")] * len(fns)
+    by a third): (best wall time, last result) of each; (nan, None) for a None in
+    ``fns`` (nothing to time: a peer's run with no cmm_dae setting to match it)."""
+    res = [fn() if fn is not None else None for fn in fns]
+    best = [float("inf") if fn is not None else math.nan for fn in fns]
     for _ in range(repeat):
         for i, fn in enumerate(fns):
+            if fn is None:
+                continue
             gc.collect()
             t = time.perf_counter()
             res[i] = fn()

@@ -30,7 +30,7 @@ import numpy as np
 from ..core.errors import CmmError
 from ..description import iftomm
 from ..simulation.runner import run_dae
-from .bench import best_time, best_times
+from .bench import best_times
 
 __all__ = ["COLUMNS", "RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "columns", "compare_a02",
            "chain_row", "error_a02", "header", "mujoco_available", "peer", "peers_table"]
@@ -165,13 +165,10 @@ def chain_row(n: int, name: str, run_peer, *, t_end: float, h: float, repeat: in
     row = {"loops": n, "h": h, f"{name}_error": err_peer, "rtol": chosen,
            "cmm_dae_error": err}
     # side by side: best-of-repeat timings, the two codes' runs alternating
-    row["cmm_dae_s"], row["path"] = math.nan, "-"
-    if chosen is None:
-        row[f"{name}_s"] = best_time(lambda: run_peer(n, t_end, h), repeat)[0]
-    else:
-        (row[f"{name}_s"], _), (row["cmm_dae_s"], res) = best_times(
-            [lambda: run_peer(n, t_end, h), lambda: run_dae(mech, t_end, rtol=chosen)], repeat)
-        row["path"] = "C" if res.meta.get("compiled") else "Python"
+    (row[f"{name}_s"], _), (row["cmm_dae_s"], res) = best_times(
+        [lambda: run_peer(n, t_end, h),
+         None if chosen is None else lambda: run_dae(mech, t_end, rtol=chosen)], repeat)
+    row["path"] = "-" if res is None else "C" if res.meta.get("compiled") else "Python"
     row["ratio"] = row["cmm_dae_s"] / row[f"{name}_s"]
     return row
 
