@@ -51,15 +51,17 @@ _driver: ctypes.CDLL | None = None
 _driver_error: str | None = None
 
 
-def _sundials_libraries() -> list[Path]:
+def sundials_library(name: str) -> Path:
+    """scikit-sundae's own SUNDIALS library ``name`` ("ida", "core", ...)."""
     where = Path(sksundae.__file__).resolve().parent.parent / "scikit_sundae.libs"
-    found = []
-    for name in _SUNDIALS:
-        libs = sorted(where.glob(f"libsundials_{name}-*.so*"))
-        if not libs:
-            raise OSError(f"scikit-sundae's SUNDIALS library '{name}' is not in {where}")
-        found.append(libs[0])
-    return found
+    libs = sorted(where.glob(f"libsundials_{name}-*.so*"))
+    if not libs:
+        raise OSError(f"scikit-sundae's SUNDIALS library '{name}' is not in {where}")
+    return libs[0]
+
+
+def _sundials_libraries() -> list[Path]:
+    return [sundials_library(name) for name in _SUNDIALS]
 
 
 #: The scikit-sundae releases (major.minor) whose SUNDIALS the driver's hand-written

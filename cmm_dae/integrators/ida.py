@@ -4,10 +4,10 @@ Stabilized index-2 (Gear-Gupta-Leimkuhler) form, ``y = [q, v, lambda, mu]``::
 
     q' - v + Phi_q^T mu = 0,   M v' + Phi_q^T lambda - Q = 0,   Phi = 0,   Phi_q v + Phi_t = 0
 
-with the residual and its exact Jacobian ``dF/dy + cj dF/dy'`` (:mod:`.ida_callbacks`)
-written through CasADi's buffers into scikit-sundae's arrays. Each :meth:`~IdaIntegrator.
-advance` is one IDA segment in one configuration, ended by a root of an event function of
-:mod:`cmm_dae.hybrid.policy` or by the end time (its limits: :mod:`.ida_steps`)."""
+with the residual and its exact Jacobian (:mod:`.ida_callbacks`) written through CasADi's
+buffers into scikit-sundae's arrays, the multipliers out of the error test (:mod:`.suppress`).
+Each :meth:`~IdaIntegrator.advance` is one IDA segment in one configuration, ended by a root
+of an event function of :mod:`cmm_dae.hybrid.policy` or the end (limits: :mod:`.ida_steps`)."""
 
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ from .ida_steps import (
     segment_times,
     sparse_solver,
 )
+from .suppress import start_suppressed
 from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
 
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
@@ -101,7 +102,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.ev_out = np.zeros(0)
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
-        # multipliers out of the error test (index-2 variables) unless an event reads them
+        # the multipliers' Newton test loose unless an event reads them
         self.relaxed = not (model.locks or model.frictional)
         self.crossed_at = math.nan  # where the last singular-position crossing ended
         self._ev_cache: dict[tuple, Buffered] = {}
@@ -156,15 +157,14 @@ class IdaIntegrator(IdaCallbacks, Integrator):
 
     def after_singular(self, t: float) -> None:
         # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
-        # restart (order 1, small steps) fails on their error test alone.
+        # restart (order 1, small steps) fails on their Newton test alone.
         self.relax_multipliers()
         self.crossed_at = t
 
     def relax_multipliers(self) -> None:
-        """Multipliers out of IDA's error test from now on, as index-2 variables usually are
-        (the outputs' forces come from a KKT solve). Kept in it where an event reads them (a
-        lock's force, friction: runs with stops take fewer steps); else out from the start
-        (A02, 32 loops, rtol 1e-3: 145 steps, not 189, and no failure at a singular one)."""
+        """The multipliers' Newton test loose from now on (they are out of the error test
+        throughout), as where no event reads them (the outputs' forces come from a KKT
+        solve)."""
         self.relaxed = True
         self._lambda_atol()
 
@@ -380,6 +380,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                 r = self._solve_compiled(tspan, y0, yp0, first_step)
             else:
                 with quiet_sundials():
+                    start_suppressed(solver, float(tspan[0]), y0, yp0, not self.model.reacting)
                     r = (_own_steps(solver, tspan, y0, yp0, self._interrupt)
                          if self.opts.output_dt is None else solver.solve(tspan, y0, yp0))
         except CmmError:

@@ -1,0 +1,85 @@
+"""The multipliers out of IDA's local error test on the Python path: SUNDIALS'
+``IDASetSuppressAlg`` on scikit-sundae's IDA, which has no binding for it.
+
+The GGL form's multipliers are index-2 variables. In IDA's error test they were either
+held to a tolerance (and after a cam follower's bounce, with a first step of 1e-12 s, their
+round-off of order eps / h^2 kept the steps of the shipped valve train at 2e-12 s until the
+run's budget was spent) or given a huge absolute tolerance, which took them out of Newton's
+convergence test as well (and the double-folded mechanism at rtol 1e-12 then stalled at
+steps of 1e-6 s in 2 of 8 nearby starts: its accelerations, which depend on the
+multipliers, were not converged). ``IDASetSuppressAlg`` does what is needed: the algebraic
+unknowns (IDASetId 0) stay in Newton's test and leave the error test. The compiled segment
+calls it in C; here it is called on the memory of scikit-sundae's solver object.
+
+scikit-sundae keeps that memory in a Cython attribute (``cdef void* mem``, the first field
+after the object header and the type's method table). The layout is checked before use
+(the type's size, and IDA's own answer for the time and step count just set), and the
+scikit-sundae releases it is read from are pinned (``csegment.TESTED_SKSUNDAE``): another
+layout raises a clear error instead of touching memory.
+
+Where the forces depend on the multipliers (friction from the reaction: a run the compiled
+segment does not take) they stay in the error test: out of it the curved slot's energy
+audit closed to 1.3e-6 J instead of 1e-6 J."""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+
+import sksundae
+from sksundae import _cy_ida
+
+from .csegment import sundials_library
+
+__all__ = ["suppress_algebraic"]
+
+_PTR = ctypes.sizeof(ctypes.c_void_p)
+#: where ``mem`` lies in the Cython object: after ob_refcnt, ob_type and __pyx_vtab
+_MEM_OFFSET = 3 * _PTR
+#: the Cython type's size in scikit-sundae 1.2: header, vtab, 9 pointers and an index,
+#: the AuxData and four Python objects
+_SIZE = 2 * _PTR + _PTR + 9 * _PTR + 8 + _PTR + 4 * _PTR
+
+
+@functools.cache
+def _ida() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(sundials_library("ida")))
+    lib.IDASetSuppressAlg.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    lib.IDAGetCurrentTime.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)]
+    lib.IDAGetNumSteps.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_long)]
+    return lib
+
+
+def _memory(solver) -> int:
+    """The address of IDA's memory inside scikit-sundae's solver (after ``init_step``)."""
+    cy = getattr(solver, "_IDA__IDA", None)
+    if not isinstance(cy, _cy_ida.IDA) or _cy_ida.IDA.__basicsize__ != _SIZE:
+        raise RuntimeError(f"scikit-sundae {sksundae.__version__}: its IDA object is not "
+                           "laid out as cmm_dae reads it")
+    mem = ctypes.c_void_p.from_address(id(cy) + _MEM_OFFSET).value
+    if not mem:
+        raise RuntimeError("scikit-sundae's IDA has no memory yet (init_step first)")
+    return mem
+
+
+def suppress_algebraic(solver, t0: float) -> None:
+    """Leave the algebraic unknowns (IDASetId 0: the multipliers) out of the local error
+    test of ``solver`` (a scikit-sundae IDA on which ``init_step(t0, ...)`` was just
+    called); they stay in Newton's convergence test. Checks that the memory read is
+    IDA's: its current time is ``t0`` and it has taken no step."""
+    mem, lib = _memory(solver), _ida()
+    t, n = ctypes.c_double(), ctypes.c_long()
+    if (lib.IDAGetCurrentTime(mem, ctypes.byref(t)) != 0 or t.value != t0
+            or lib.IDAGetNumSteps(mem, ctypes.byref(n)) != 0 or n.value != 0):
+        raise RuntimeError("scikit-sundae's IDA memory is not where cmm_dae reads it")
+    if lib.IDASetSuppressAlg(mem, 1) != 0:
+        raise RuntimeError("IDASetSuppressAlg failed")
+
+
+def start_suppressed(solver, t0: float, y0, yp0, suppress: bool = True) -> None:
+    """``solver.init_step(t0, y0, yp0)`` (IDA's memory set up) and, with ``suppress``,
+    :func:`suppress_algebraic`: its next ``solve`` or ``step`` calls re-initialise IDA at
+    the same start and keep the option."""
+    solver.init_step(t0, y0, yp0)
+    if suppress:
+        suppress_algebraic(solver, t0)
