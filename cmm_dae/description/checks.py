@@ -20,6 +20,7 @@ from .joint_checks import (  # noqa: F401 (the names the description may use)
     gear_problems,
     joint_problems,
 )
+from .parts import STOP_TOL
 
 MOTIONS = ("constant_speed", "polynomial", "harmonic", "table")
 
@@ -295,9 +296,10 @@ def _check_initial(m: Any, out: list[Problem]) -> None:
                                    "velocity comes from its driver"))
             elif key == "joints" and m.joints[jn].limits is not None:
                 lim = m.joints[jn].limits
-                tol = 1e-12
-                if (lim.lower is not None and val < lim.lower - tol) or (
-                        lim.upper is not None and val > lim.upper + tol):
+                if lim.beyond(val) > 0.0 and lim.on(val) is None:
                     out.append(Problem("initial", f"joints.{jn}", f"{val} lies outside the "
-                                       f"limits [{lim.lower}, {lim.upper}] of joint '{jn}'"))
+                                       f"limits [{lim.lower}, {lim.upper}] of joint '{jn}' "
+                                       f"(by {lim.beyond(val):.3g}; a start within "
+                                       f"{STOP_TOL:g} times max(1, |stop|) of a stop is "
+                                       "put on it)"))
 

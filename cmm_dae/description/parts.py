@@ -21,6 +21,44 @@ class Limits:
     lower: float | None = None
     upper: float | None = None
 
+    def sides(self) -> list[tuple[str, float]]:
+        """The stops that are given, as (side, position) pairs."""
+        return [(s, L) for s, L in (("lower", self.lower), ("upper", self.upper))
+                if L is not None]
+
+    def beyond(self, c: float) -> float:
+        """How far ``c`` lies beyond the nearer stop it passes (rad or m; 0 inside)."""
+        out = 0.0
+        if self.lower is not None:
+            out = max(out, self.lower - c)
+        if self.upper is not None:
+            out = max(out, c - self.upper)
+        return out
+
+    def on(self, c: float) -> str | None:
+        """The side whose stop ``c`` lies on, within :func:`stop_tolerance` (either way of
+        it), else None."""
+        return next((s for s, L in self.sides() if abs(c - L) <= stop_tolerance(L)), None)
+
+    def snap(self, c: float) -> float:
+        """``c`` put exactly on a stop it lies on (:meth:`on`), else unchanged."""
+        side = self.on(c)
+        return c if side is None else (self.lower if side == "lower" else self.upper)
+
+
+#: How near a joint coordinate must be to a stop to be on it: this times max(1, |stop|)
+#: (rad or m). One tolerance everywhere: the file check refuses a start beyond a stop by
+#: more, the start puts a joint within it exactly on the stop, the policy decides a start on
+#: the stop with it. With three (1e-12 absolute in the file check, relative at the start),
+#: a block 1e-12 m beyond its stop at 1 m passed the one and not the other, and fell 5 m
+#: through the stop in 1 s with "success".
+STOP_TOL = 1e-12
+
+
+def stop_tolerance(L: float) -> float:
+    """:data:`STOP_TOL` times max(1, |L|): the tolerance of "on the stop" at ``L``."""
+    return STOP_TOL * max(1.0, abs(L))
+
 
 @dataclass(frozen=True)
 class Spring:

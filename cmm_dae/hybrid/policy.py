@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from ..core.records import Event, EventKind, Side
+from ..description.parts import stop_tolerance
 from ..equations.kinematics import (
     dependent_rows,
     project_positions,
@@ -161,11 +162,6 @@ def resting_rate(cd: np.ndarray) -> float:
     return 1e-12 * max(1.0, float(np.max(np.abs(cd), initial=0.0)))
 
 
-def on_stop(c: float, L: float) -> bool:
-    """A joint coordinate ``c`` on its limit ``L`` to round-off (a start on the stop)."""
-    return abs(c - L) <= 1e-12 * max(1.0, abs(L))
-
-
 def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
     """Gaps that are zero at the start of a run and close: a joint that starts exactly on
     its stop, moving into it.
@@ -184,7 +180,7 @@ def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigge
         k = model.jidx[tr.joint]
         L = hs.limit_value(tr.joint, tr.side)
         into = cd[k] < -still if tr.side == "lower" else cd[k] > still
-        if into and on_stop(c[k], L):
+        if into and abs(c[k] - L) <= stop_tolerance(L):
             out.append(tr)
     return out + zone_edges(hs, q, v)
 

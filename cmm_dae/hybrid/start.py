@@ -17,7 +17,7 @@ from ..core.records import Event, EventKind
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
-from .policy import on_stop, resting_rate, stick_or_slip
+from .policy import resting_rate, stick_or_slip
 from .state import HybridState, idle_slide
 from .zones import initial_zones
 
@@ -182,7 +182,9 @@ def start_spec(mech) -> tuple[dict[str, float], dict[str, float]]:
     non-driven ``[initial] joints`` with their rates (0 unless given), or the rates of
     ``[initial] velocities`` alone when they name as many other joints."""
     ini = mech.initial
-    known = {k: v for k, v in ini.joints.items() if k not in mech.drivers}
+    # a joint named within the stop tolerance of a stop starts exactly on it
+    known = {k: (v if mech.joints[k].stops is None else mech.joints[k].stops.snap(v))
+             for k, v in ini.joints.items() if k not in mech.drivers}
     rates = {k: 0.0 for k in known}
     rates.update({k: v for k, v in ini.velocities.items() if k not in mech.drivers})
     if len(ini.velocities) and set(ini.velocities) != set(known) and \
@@ -210,9 +212,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     for name in limited:
         lim = mech.joints[name].stops
         val = float(c0[model.jidx[name]])
-        tol = 1e-12 * max(1.0, abs(val))
-        if (lim.lower is not None and val < lim.lower - tol) or (
-                lim.upper is not None and val > lim.upper + tol):
+        if lim.beyond(val) > 0.0 and lim.on(val) is None:
             beyond.append(Problem("initial", "joints", f"joint '{name}' assembles at {val:.9g}, "
                                   f"outside its limits [{lim.lower}, {lim.upper}]"))
     if beyond:
@@ -223,10 +223,9 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     stops = {}
     for name in limited:
         lim = mech.joints[name].stops
-        val = float(c0[model.jidx[name]])
-        for side, L in (("lower", lim.lower), ("upper", lim.upper)):
-            if L is not None and on_stop(val, L):
-                stops[name] = side
+        side = lim.on(float(c0[model.jidx[name]]))
+        if side is not None:
+            stops[name] = side
     events: list[Event] = []
     cd0 = model.joint_rates(q, v)[1]
     for name, side in stops.items():
