@@ -33,7 +33,7 @@ class RunOptions:
     output_dt: float | None = 0.01
     dt: float = 0.01
     output_every: int = 1
-    max_events: int = 1000
+    max_events: int = 1000  # (simulate's default: per simulated second)
     v_lock: float = 1e-6
     max_steps: int = 500_000
     #: a progress bar moved to the time reached (None: none)

@@ -61,8 +61,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
              rtol: float = IDA_DEFAULTS["rtol"], atol: float | None = IDA_DEFAULTS["atol"],
              output_dt: float | None = IDA_DEFAULTS["output_dt"],
              dt: float = ITERATIVE_DEFAULTS["dt"],
-             output_every: int = ITERATIVE_DEFAULTS["output_every"], max_events: int = 1000,
-             v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
+             output_every: int = ITERATIVE_DEFAULTS["output_every"],
+             max_events: int | None = None, v_lock: float = 1e-6,
+             max_steps: int | None = None, throw: bool = True,
              model: Model | None = None, progress: bool = False,
              branch: str | tuple[str, int] = "continue",
              compiled: bool | str = IDA_DEFAULTS["compiled"],
@@ -81,17 +82,17 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         IDA: relative tolerance.
     atol : float or None
         IDA: absolute tolerance on positions (m, rad) and velocities (m/s, rad/s); None:
-        1e-2 of ``rtol`` (1e-10 at the default rtol), so that a tighter rtol is not
-        capped by a fixed atol where a coordinate passes zero (IFToMM A01 over 50 s at
-        rtol 1e-11: 1.5e-6 m with atol 1e-10, 1.2e-7 to 2.1e-7 m with 1e-13).
+        1e-2 of ``rtol``, so that a tighter rtol is not capped by a fixed atol where a
+        coordinate passes zero (IFToMM A01, 50 s, rtol 1e-11: 1.5e-6 m at atol 1e-10).
     output_dt : float or None
         IDA: output spacing, s (None: IDA's own steps). Event times are always added.
     dt : float
         Iterative: the fixed step, s (the paper uses 0.01 s).
     output_every : int
         Iterative: keep every k-th step (events are always kept).
-    max_events : int
-        Stop with :class:`SolverError` after this many events.
+    max_events : int or None
+        Stop with :class:`SolverError` after this many events (default: 1000 per
+        simulated second, at least 1000).
     v_lock : float
         A rebound slower than this (rad/s or m/s) locks the joint.
     max_steps : int or None
@@ -104,7 +105,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     model : Model or None
         A prebuilt model of ``mech`` (saves the CasADi build).
     progress : bool
-        Draw a progress bar of the simulated time on stderr.
+        A progress bar of the simulated time on stderr.
     branch : "continue" or (joint, sign)
         Which branch to take at a singular position: the branch of the motion (continuity
         of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
@@ -130,8 +131,7 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     Raises
     ------
     TypeError
-        ``mech`` is not a Mechanism (a model file's path: read it with
-        :func:`cmm_dae.load`).
+        ``mech`` is not a Mechanism (a model file's path: :func:`cmm_dae.load` reads it).
     ModelError
         A bad option (all of them named at once, under ``[run]``): a bad value, an option
         of the other method given a value other than its default (it would be ignored),
@@ -368,7 +368,7 @@ def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:
 
 def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = IDA_DEFAULTS["rtol"],
             atol: float | None = IDA_DEFAULTS["atol"],
-            output_dt: float | None = IDA_DEFAULTS["output_dt"], max_events: int = 1000,
+            output_dt: float | None = IDA_DEFAULTS["output_dt"], max_events: int | None = None,
             v_lock: float = 1e-6, max_steps: int | None = None, throw: bool = True,
             model: Model | None = None, progress: bool = False,
             branch: str | tuple[str, int] = "continue",
@@ -385,7 +385,7 @@ def run_dae(mech: Mechanism, t_end: float = 10.0, *, rtol: float = IDA_DEFAULTS[
 def run_iterative(mech: Mechanism, t_end: float = 10.0, *,
                   dt: float = ITERATIVE_DEFAULTS["dt"],
                   output_every: int = ITERATIVE_DEFAULTS["output_every"],
-                  v_lock: float = 1e-6, max_events: int = 1000,
+                  v_lock: float = 1e-6, max_events: int | None = None,
                   max_steps: int | None = None, throw: bool = True,
                   model: Model | None = None, progress: bool = False,
                   branch: str | tuple[str, int] = "continue") -> Result:
