@@ -129,6 +129,28 @@ def test_the_old_flat_paths_still_import_with_a_warning():
     assert old is policy
 
 
+def test_an_old_path_leaves_the_api_function_of_its_name():
+    """Importing ``cmm_dae.sweep``, ``.structure`` or ``.design`` (old module paths whose
+    names are also API functions) put the module in the function's place: the next
+    ``cd.sweep(...)`` was "'module' object is not callable". The module still imports."""
+    import importlib
+    import sys
+    import types
+
+    import cmm_dae as cd
+    from cmm_dae.description import structure
+    from cmm_dae.studies import design, sweep
+
+    for name, new in (("sweep", sweep), ("structure", structure), ("design", design)):
+        sys.modules.pop(f"cmm_dae.{name}", None)
+        with pytest.warns(DeprecationWarning, match=f"cmm_dae.{name} is now"):
+            old = importlib.import_module(f"cmm_dae.{name}")
+        assert old is new
+        assert callable(getattr(cd, name)) and not isinstance(getattr(cd, name),
+                                                               types.ModuleType)
+        assert getattr(cd, name) is getattr(new, name)
+
+
 def test_no_module_over_400_lines():
     over = {str(f.relative_to(PKG)) for f, _ in _modules()
             if len(f.read_text().splitlines()) > 400}

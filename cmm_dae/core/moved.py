@@ -11,6 +11,7 @@ import importlib
 import importlib.abc
 import importlib.util
 import sys
+import types
 import warnings
 
 #: old module (under cmm_dae) -> the module that holds its code now
@@ -66,7 +67,24 @@ class _Finder(importlib.abc.MetaPathFinder):
         return importlib.util.spec_from_loader(fullname, _Alias(f"cmm_dae.{MOVED[old]}"))
 
 
-def install() -> None:
-    """Put the finder of old paths on ``sys.meta_path`` (once)."""
+class Package(types.ModuleType):
+    """The class of the ``cmm_dae`` module: importing an old path whose name is also a
+    function of the API (``cmm_dae.sweep``, ``.structure``, ``.design``) does not put the
+    module in that function's place (Python's import sets the parent's attribute after
+    loading a submodule; the next ``cd.sweep(...)`` was "'module' object is not
+    callable")."""
+
+    def __setattr__(self, name: str, value) -> None:
+        old = self.__dict__.get(name)
+        if (name in MOVED and isinstance(value, types.ModuleType) and old is not None
+                and not isinstance(old, types.ModuleType)):
+            return
+        super().__setattr__(name, value)
+
+
+def install(package: str = "cmm_dae") -> None:
+    """Put the finder of old paths on ``sys.meta_path`` (once) and guard ``package``'s
+    API names (:class:`Package`)."""
     if not any(isinstance(f, _Finder) for f in sys.meta_path):
         sys.meta_path.append(_Finder())
+    sys.modules[package].__class__ = Package
