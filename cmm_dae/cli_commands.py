@@ -116,7 +116,7 @@ def _compare(args: argparse.Namespace) -> int:
         notes.append("no work-precision study: the mechanism has no driver")
     else:
         try:
-            wp = work_precision(mech, t_end=args.t_end, model=model)
+            wp = work_precision(mech, t_end=args.t_end, model=model, grid=args.dt)
         except CmmError as e:
             notes.append(f"work-precision study left out: {e}")
         else:

@@ -130,3 +130,21 @@ def test_a_start_within_the_stop_tolerance_is_on_the_stop(method, L, upper):
     assert np.all(res.joint("X").position == L)
     with pytest.raises(cd.ModelError, match=r"\[initial\] joints\.X: .* outside the limits"):
         block(L + sign * 1.1 * tol, L, upper)
+
+
+@pytest.mark.timeout(200)
+def test_work_precision_takes_the_comparisons_grid():
+    """``compare``'s work-precision study ran on a fixed 0.01-s grid with dt 0.01, 0.005,
+    0.0025 whatever --dt said: on the cam (events every few ms) no sample was away from an
+    event and every row read 0.0. On the run's grid now, and a row with nothing to measure
+    is NaN, not 0."""
+    from cmm_dae.studies.precision import work_precision
+
+    mech = cd.load(cd.example("cam_valve_train"))
+    wp = work_precision(mech, t_end=0.02, grid=1e-4, rtols=(1e-4, 1e-6, 1e-8))
+    assert [r.setting for r in wp.rows] == ["rtol 0.0001", "rtol 1e-06", "rtol 1e-08",
+                                           "dt 0.0001", "dt 5e-05", "dt 2.5e-05"]
+    ida = [r.error for r in wp.rows if r.method == "IDA"]
+    assert all(0.0 < e < 1e-3 for e in ida) and ida[0] > ida[1] > ida[2]
+    coarse = work_precision(mech, t_end=0.02, grid=0.01, rtols=(1e-6,), dts=(1e-3,))
+    assert all(math.isnan(r.error) for r in coarse.rows)
