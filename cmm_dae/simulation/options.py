@@ -102,20 +102,20 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
     ok_every = need(isinstance(output_every, int) and not isinstance(output_every, bool)
                     and output_every >= 1, "output_every", "expected an integer >= 1",
                     output_every)
-    ok_events = need(max_events is None or (isinstance(max_events, int)
-                                            and not isinstance(max_events, bool)
-                                            and max_events >= 0),
-                     "max_events", "expected an integer >= 0 or None", max_events)
-    if ok_t and ok_events and max_events is None:
-        max_events = max(1000, int(min(EVENTS_PER_SECOND * t_end, 2**62)))
+    def budget(value: Any, key: str, least: int, per_second: int, floor: int) -> tuple:
+        """A count limit (an integer >= least, or None: per_second of t_end, at least
+        floor) and whether it is good."""
+        ok = need(value is None or (isinstance(value, int) and not isinstance(value, bool)
+                                    and value >= least),
+                  key, f"expected an integer >= {least} or None", value)
+        if ok_t and ok and value is None:
+            value = max(floor, int(min(per_second * t_end, 2**62)))
+        return value, ok
+
+    max_events, _ = budget(max_events, "max_events", 0, EVENTS_PER_SECOND, 1000)
     need(_is_num(v_lock) and math.isfinite(v_lock) and v_lock >= 0, "v_lock",
          "expected a speed >= 0 (rad/s or m/s)", v_lock)
-    ok_steps = need(max_steps is None or (isinstance(max_steps, int)
-                                          and not isinstance(max_steps, bool)
-                                          and max_steps >= 1),
-                    "max_steps", "expected an integer >= 1 or None", max_steps)
-    if ok_t and ok_steps and max_steps is None:
-        max_steps = max(500_000, int(min(STEPS_PER_SECOND * t_end, 2**62)))
+    max_steps, ok_steps = budget(max_steps, "max_steps", 1, STEPS_PER_SECOND, 500_000)
     if ok_t and ok_dt and ok_steps and method == "iterative":
         n = t_end / dt
         if n > max_steps:
