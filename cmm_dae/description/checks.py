@@ -296,7 +296,7 @@ def _check_initial(m: Any, out: list[Problem]) -> None:
                                    "velocity comes from its driver"))
             elif key == "joints" and m.joints[jn].limits is not None:
                 lim = m.joints[jn].limits
-                if lim.beyond(val) > 0.0 and lim.on(val) is None:
+                if lim.outside(val):
                     out.append(Problem("initial", f"joints.{jn}", f"{val} lies outside the "
                                        f"limits [{lim.lower}, {lim.upper}] of joint '{jn}' "
                                        f"(by {lim.beyond(val):.3g}; a start within "

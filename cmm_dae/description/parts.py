@@ -40,6 +40,10 @@ class Limits:
         it), else None."""
         return next((s for s, L in self.sides() if abs(c - L) <= stop_tolerance(L)), None)
 
+    def outside(self, c: float) -> bool:
+        """``c`` beyond a stop by more than :func:`stop_tolerance` (a start refused)."""
+        return self.beyond(c) > 0.0 and self.on(c) is None
+
     def snap(self, c: float) -> float:
         """``c`` put exactly on a stop it lies on (:meth:`on`), else unchanged."""
         side = self.on(c)

@@ -212,7 +212,7 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
     for name in limited:
         lim = mech.joints[name].stops
         val = float(c0[model.jidx[name]])
-        if lim.beyond(val) > 0.0 and lim.on(val) is None:
+        if lim.outside(val):
             beyond.append(Problem("initial", "joints", f"joint '{name}' assembles at {val:.9g}, "
                                   f"outside its limits [{lim.lower}, {lim.upper}]"))
     if beyond:
