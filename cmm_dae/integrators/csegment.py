@@ -96,7 +96,7 @@ def driver(build: bool = True) -> ctypes.CDLL:
         lib.cmm_seg_new.restype = _P
         n, x, c_long = ctypes.c_int, ctypes.c_double, ctypes.c_long
         lib.cmm_seg_new.argtypes = [n, n, n, *[_P] * 8, _D, x, _D, _D, _D, x, x, x, c_long,
-                                    c_long, n, _D, n, n, n, _I, _I, n, _I, n, n]
+                                    c_long, n, n, _D, n, n, n, _I, _I, n, _I, n, n]
         lib.cmm_seg_run.restype = n
         lib.cmm_seg_run.argtypes = [_P, _D, _D, n, _I, _I, _L]
         lib.cmm_seg_free.restype, lib.cmm_seg_free.argtypes = None, [_P]
@@ -198,11 +198,12 @@ class CompiledModel:
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,
             max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
-            band: bool = False) -> SegmentRun:
+            band: bool = False, suppress: bool = True) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
-        Jacobian is factored as a band where reordering makes it one (:attr:`band`)."""
+        Jacobian is factored as a band where reordering makes it one (:attr:`band`);
+        ``suppress``: the multipliers out of the error test (:mod:`.suppress`)."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
@@ -214,7 +215,7 @@ class CompiledModel:
             N, ne, model.ida.lam.start, self.res[0], self.res[1], self.jac[0], self.jac[1],
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
-            D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed),
+            D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed), int(suppress),
             tout_.ctypes.data_as(_D), tout_.size, int(tspan.size == 2), self.rowind.size,
             self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse),
             *((order[0].ctypes.data_as(_I), order[1], order[2]) if order else (None, 0, 0)))

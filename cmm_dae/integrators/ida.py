@@ -102,8 +102,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.ev_out = np.zeros(0)
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
-        # the multipliers' Newton test loose unless an event reads them
-        self.relaxed = not (model.locks or model.frictional)
+        # multipliers: Newton's test loose unless an event reads them; error test: suppress.py
+        self.relaxed, self.suppress = not (model.locks or model.frictional), not model.reacting
         self.crossed_at = math.nan  # where the last singular-position crossing ended
         self._ev_cache: dict[tuple, Buffered] = {}
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
@@ -380,7 +380,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                 r = self._solve_compiled(tspan, y0, yp0, first_step)
             else:
                 with quiet_sundials():
-                    start_suppressed(solver, float(tspan[0]), y0, yp0, not self.model.reacting)
+                    start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
                     r = (_own_steps(solver, tspan, y0, yp0, self._interrupt)
                          if self.opts.output_dt is None else solver.solve(tspan, y0, yp0))
         except CmmError:

@@ -149,7 +149,7 @@ class IdaCallbacks:
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress,
-                       band=self.linear_solver == "band")
+                       band=self.linear_solver == "band", suppress=self.suppress)
         self.n_steps = r.steps
         self.stalled, self.interrupted = r.stalled, r.interrupted
         return r

@@ -250,14 +250,15 @@ void cmm_seg_free(Seg *s) {
  * Jacobian's nnz nonzeros of the CSC pattern (colptr, rowind); sparse: solved by SuperLU_MT
  * on one thread, as scikit-sundae's "sparse", else by dense LU; perm (not NULL): IDA's
  * unknowns and residuals reordered (its i-th is the mechanism's perm[i]) into a band of
- * half widths ml and mu, solved by band LU. Returns NULL when SUNDIALS cannot be set up
+ * half widths ml and mu, solved by band LU; suppress: the algebraic unknowns (the
+ * multipliers) out of IDA's local error test. Returns NULL when SUNDIALS cannot be set up
  * (out of memory). */
 Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  cafun res, cawork res_w, cafun jac, cawork jac_w,
                  cafun ev, cawork ev_w, cafun evx, cawork evx_w, double *p,
                  double t0, const double *y0, const double *yp0, const double *atol,
                  double rtol, double first_step, double min_step, long max_steps,
-                 long budget, int relaxed,
+                 long budget, int relaxed, int suppress,
                  const double *tout, int nout, int onestep,
                  int nnz, const int *colptr, const int *rowind, int sparse,
                  const int *perm, int ml, int mu) {
@@ -345,9 +346,8 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
         ok = ok && IDASetRootDirection(s->mem, s->dir) == 0;
     }
     ok = ok && IDASetId(s->mem, s->id) == 0;
-    /* the multipliers in Newton's test, out of the error test (suppress.py says why; a
-     * model with friction from the reaction, which keeps them in it, runs in Python) */
-    ok = ok && IDASetSuppressAlg(s->mem, 1) == 0;
+    /* the multipliers in Newton's test, out of the error test (suppress.py says why) */
+    ok = ok && IDASetSuppressAlg(s->mem, suppress) == 0;
     ok = ok && IDASetInitStep(s->mem, first_step) == 0;
     ok = ok && IDASetMinStep(s->mem, min_step) == 0;
     ok = ok && IDASetMaxStep(s->mem, 0.0) == 0;

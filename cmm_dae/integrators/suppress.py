@@ -13,13 +13,13 @@ calls it in C; here it is called on the memory of scikit-sundae's solver object.
 
 scikit-sundae keeps that memory in a Cython attribute (``cdef void* mem``, the first field
 after the object header and the type's method table). The layout is checked before use
-(the type's size, and IDA's own answer for the time and step count just set), and the
-scikit-sundae releases it is read from are pinned (``csegment.TESTED_SKSUNDAE``): another
-layout raises a clear error instead of touching memory.
+(the type's size; then IDA's own answer for the time and step count just set), and
+pyproject.toml pins the scikit-sundae releases it was read from (1.2.x): another layout
+raises a clear error instead of touching memory.
 
-Where the forces depend on the multipliers (friction from the reaction: a run the compiled
-segment does not take) they stay in the error test: out of it the curved slot's energy
-audit closed to 1.3e-6 J instead of 1e-6 J."""
+Where the forces depend on the multipliers (friction from the reaction) they stay in the
+error test (the integrator's ``suppress``, for both paths): out of it the curved slot's
+energy audit closed to 1.3e-6 J instead of 1e-6 J."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from sksundae import _cy_ida
 
 from .csegment import sundials_library
 
-__all__ = ["suppress_algebraic"]
+__all__ = ["start_suppressed", "suppress_algebraic"]
 
 _PTR = ctypes.sizeof(ctypes.c_void_p)
 #: where ``mem`` lies in the Cython object: after ob_refcnt, ob_type and __pyx_vtab
