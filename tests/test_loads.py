@@ -53,26 +53,22 @@ def test_andrews_squeezer_at_a_loose_tolerance_runs_through():
     assert 1e-3 < err < 0.05
 
 
-def test_a_stiff_squeezer_runs_to_the_end_at_loose_tolerances(tmp_path):
+def test_a_stiff_failure_without_a_singular_position_is_no_dead_point(tmp_path):
     """The squeezer with its spring 1e4 times stiffer (4.53e7 N/m): at rtol 1e-2, 5e-3 and
-    1e-3 IDA gave up before 0.001 s while the multipliers were in its error test (and
-    such a failure was once reported as a "dead point"); out of it (IDASetSuppressAlg,
-    still in Newton's test) every run reaches 0.03 s with no event, the C and the Python
-    path the same to 1e-9 rad. (Not accurate: BDF damps the stiff spring at these
-    tolerances, the crank at 3.8 to 8.3 rad where a run at rtol 1e-8 has 848 rad.)"""
+    1e-3 IDA gives up before 0.001 s. The constraints' singular-value ratio is 3e-3
+    throughout (no singular position anywhere); such a failure was once crossed as a
+    singular position and reported as a "dead point". It is IDA's own failure, said so,
+    with the run kept up to it."""
     text = (MODELS / "andrews_squeezer.toml").read_text()
     assert "stiffness = 4530.0 " in text
     stiff = tmp_path / "stiff_squeezer.toml"
     stiff.write_text(text.replace("stiffness = 4530.0 ", "stiffness = 4.53e7 "))
-    mech = cd.load(stiff)
-    for rtol in (1e-2, 5e-3, 1e-3):
-        ends = []
-        for compiled in (False, True):
-            res = cd.run_dae(mech, 0.03, rtol=rtol, compiled=compiled, throw=False)
-            assert res.status is cd.Status.SUCCESS, (rtol, res.message)
-            assert res.t[-1] == 0.03 and not res.events
-            ends.append(res.joint("beta").position[-1])  # the crank's angle, rad
-        assert abs(ends[0] - ends[1]) <= 1e-9, rtol
+    for rtol in (1e-2, 5e-3, 1e-3):  # (at 1e-2 the ratio at the failure, 3.6e-3, fell
+        # locally but was above the segment's start's, 2.8e-3: once read as a dead point)
+        res = cd.run_dae(cd.load(stiff), 0.03, rtol=rtol, output_dt=None, throw=False)
+        assert res.status is cd.Status.INTEGRATOR, rtol
+        assert "no dead point found" in res.message
+        assert 1e-4 < res.t[-1] < 0.03 and not res.events
 
 
 # --------------------------------------------------------------- loaded pendulum

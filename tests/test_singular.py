@@ -53,9 +53,9 @@ def test_a02_crosses_its_singular_positions_on_the_parallelogram_branch(n):
     # energy is conserved through the crossings
     e = res.energy()
     total = e.kinetic + e.potential
-    # (measured 1.01e-8 and 4.3e-9 of the energy, N = 1 and 10, with the multipliers out of
-    # IDA's error test; 9.7e-9 and 1.1e-8 with them in it at a huge tolerance: at 1e-8 the
-    # test passed or failed with the step sequence; the audit's residual the same)
+    # (the audit's residual measured 9.7e-9 and 1.12e-8 of the energy, N = 1 and 10, by a
+    # script here; 1.01e-8 and 4.3e-9 with the multipliers out of IDA's error test: at 1e-8
+    # the test passed or failed with the step sequence)
     assert np.max(np.abs(total - total[0])) <= 1.5e-8 * abs(iftomm.a02_energy(n))
     # a crossing loses nothing: the audit balances through it (it booked the kinetic
     # energy gained across the crossing's window, 4.2 J over 6 s, as a loss before)

@@ -5,7 +5,7 @@ Stabilized index-2 (Gear-Gupta-Leimkuhler) form, ``y = [q, v, lambda, mu]``::
     q' - v + Phi_q^T mu = 0,   M v' + Phi_q^T lambda - Q = 0,   Phi = 0,   Phi_q v + Phi_t = 0
 
 with the residual and its exact Jacobian (:mod:`.ida_callbacks`) written through CasADi's
-buffers into scikit-sundae's arrays, the multipliers out of the error test (:mod:`.suppress`).
+buffers into scikit-sundae's arrays (the multipliers out of the error test: :mod:`.suppress`).
 Each :meth:`~IdaIntegrator.advance` is one IDA segment in one configuration, ended by a root
 of an event function of :mod:`cmm_dae.hybrid.policy` or the end (limits: :mod:`.ida_steps`)."""
 
@@ -40,7 +40,7 @@ from .ida_steps import (
     segment_times,
     sparse_solver,
 )
-from .suppress import start_suppressed
+from .suppress import start_suppressed, suppressed
 from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
 
 #: A lock force's event function is taken from IDA's multipliers while it is farther from
@@ -103,7 +103,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.triggers: list[ev.Trigger] = []
         self.first_step = 0.0
         # multipliers: Newton's test loose unless an event reads them; error test: suppress.py
-        self.relaxed, self.suppress = not (model.locks or model.frictional), not model.reacting
+        self.relaxed, self.suppress = not (model.locks or model.frictional), suppressed(model)
         self.crossed_at = math.nan  # where the last singular-position crossing ended
         self._ev_cache: dict[tuple, Buffered] = {}
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a

@@ -13,9 +13,10 @@ from ..equations.model import Model
 __all__ = ["ATOL_LAMBDA", "ATOL_LAMBDA_SINGULAR", "ATOL_MU", "ATOL_WORK", "FORCE_REF",
            "lambda_atol", "lambda_scale", "natural_step", "tolerances"]
 
-#: Absolute tolerances on the multipliers in Newton's convergence test. Both are index-2
-#: variables of the GGL form, out of IDA's local error test (:mod:`.suppress`). mu (zero on
-#: the exact solution) gets a huge tolerance (with 1e-8 IDA failed at t = 0).
+#: Absolute tolerances on the multipliers. Both are index-2 variables of the GGL form, in
+#: IDA's error test but where a contact lands (:mod:`.suppress`: there in Newton's test
+#: alone). mu (zero on the exact solution) gets a huge tolerance, which takes it out of the
+#: test (with 1e-8 IDA fails at t = 0).
 #: lambda, the constraint forces in N or N m, must still converge in the Newton iteration,
 #: since the accelerations depend on it: with 1e3 the slider-crank with a stop needed 2.8x
 #: the steps and 6x the residual evaluations at rtol 1e-8 (convergence failures); 1e-2 N
