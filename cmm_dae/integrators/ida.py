@@ -157,14 +157,14 @@ class IdaIntegrator(IdaCallbacks, Integrator):
 
     def after_singular(self, t: float) -> None:
         # Near a singular position the multipliers' sensitivity grows as 1 / sigma^2 and a
-        # restart (order 1, small steps) fails on their Newton test alone.
+        # restart (order 1, small steps) fails on their error test alone.
         self.relax_multipliers()
         self.crossed_at = t
 
     def relax_multipliers(self) -> None:
-        """The multipliers' Newton test loose from now on (they are out of the error test
-        throughout), as where no event reads them (the outputs' forces come from a KKT
-        solve)."""
+        """Multipliers out of IDA's error test from now on by a huge tolerance (where a contact
+        lands they are out already, :mod:`.suppress`: it loosens Newton's test), as where no
+        event reads them (A02, 32 loops, rtol 1e-3: 145 steps, not 189)."""
         self.relaxed = True
         self._lambda_atol()
 

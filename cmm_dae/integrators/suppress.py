@@ -82,11 +82,11 @@ def suppress_algebraic(solver, t0: float) -> None:
 
 
 def start_suppressed(solver, t0: float, y0, yp0, suppress: bool = True) -> None:
-    """``solver.init_step(t0, y0, yp0)`` (IDA's memory set up) and, with ``suppress``,
-    :func:`suppress_algebraic`: its next ``solve`` or ``step`` calls re-initialise IDA at
-    the same start and keep the option."""
-    solver.init_step(t0, y0, yp0)
+    """With ``suppress``: ``solver.init_step(t0, y0, yp0)`` (IDA's memory set up) and
+    :func:`suppress_algebraic`; its next ``solve`` or ``step`` call re-initialises IDA at
+    the same start and keeps the option. Without: nothing (no second initialisation)."""
     if suppress:
+        solver.init_step(t0, y0, yp0)
         suppress_algebraic(solver, t0)
 
 
