@@ -153,6 +153,9 @@ def _studies(sub) -> None:
     sw.add_argument("--out", required=True, help="CSV written as runs finish (and resumed)")
     sw.add_argument("--t-end", type=float, default=10.0, help="end time, s (10)")
     sw.add_argument("--rtol", type=float, default=1e-8, help="IDA relative tolerance (1e-8)")
+    sw.add_argument("--output-dt", type=float, default=0.01,
+                    help="output spacing, s (0.01; the events and peak efforts do not "
+                    "depend on it)")
     sw.add_argument("--workers", type=_positive_int, default=None,
                     help="local processes (all cores)")
     sw.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")

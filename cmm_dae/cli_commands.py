@@ -29,15 +29,22 @@ def _summary(res) -> None:
     pos, vel = res.drift
     print(f"constraint drift: |Phi| <= {pos:.2e}, |Phi'| <= {vel:.2e}")
     for name in res.layout.drivers:
-        e = res.driver(name).effort
-        print(f"driver {name}: effort {e.min():.6g} .. {e.max():.6g}")
+        d = res.driver(name)  # extremes over every step and event, not the output grid
+        print(f"driver {name}: effort {d.low:.6g} (t = {d.t_low:.6g} s) .. {d.high:.6g} "
+              f"(t = {d.t_high:.6g} s)")
     if res.events:
         print(res.event_table())
 
 
 def _refuse_overwrite(paths, force: bool) -> None:
     """The one overwrite policy of every command: files the command would write that
-    exist already are refused up front, before anything is computed, unless --force."""
+    exist already are refused up front, before anything is computed, unless --force; and
+    two outputs of one command never share a file (the second would replace the first)."""
+    given = [Path(p).resolve() for p in paths if p is not None]
+    if len(set(given)) < len(given):
+        same = next(p for p in given if given.count(p) > 1)
+        raise CmmError(f"two outputs would both be written to '{same}' (--csv and --save "
+                       "take different files)")
     there = [str(p) for p in paths if p is not None and Path(p).exists()]
     if there and not force:
         raise CmmError(f"would overwrite {', '.join(there)}; pass --force to replace "
@@ -142,12 +149,20 @@ def _result_of(source: str, t_end: float):
     from .description.library import model_path
 
     path = model_path(source)
-    if path.suffix == ".npz":
+    if path.suffix == ".npz" or _is_zip(path):  # (Result.save writes any name it is given)
         return load_result(path)
     if path.suffix == ".toml":
         return simulate(_load(str(path)), t_end)
     raise CmmError(f"'{source}': expected a model file (.toml) or a saved result (.npz), "
                    f"not a '{path.suffix or 'suffix-less'}' file")
+
+
+def _is_zip(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(2) == b"PK"
+    except OSError:
+        return False
 
 
 def _events(args: argparse.Namespace) -> int:
@@ -256,7 +271,7 @@ def _sweep(args: argparse.Namespace) -> int:
                            "tcp://host:8786") from None
     table = sweep(mech, params, t_end=args.t_end, client=client, workers=args.workers,
                   checkpoint=args.out, progress=True, rtol=args.rtol,
-                  compiled=args.compiled)
+                  output_dt=args.output_dt, compiled=args.compiled)
     ok = sum(r["status"] == "success" for r in table.rows)
     print(f"{len(table)} runs ({ok} successful) -> {args.out}")
     return 0

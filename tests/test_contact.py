@@ -472,7 +472,7 @@ def test_contact_from_a_file_runs_as_built_in_python(tmp_path):
     ('connects = ["ground.O", "cam.O"]', 'connects = ["ground.O", "cam.O"]\nside = "inside"',
      r"\[joints\.A\] side: only a contact joint has this key"),
     ("unilateral = true", 'unilateral = true\nside = "above"',
-     r"\[joints\.K\] side: expected one of outside, inside, got 'above'"),
+     r"\[joints\.K\] side: expected one of outside, inside, left, right, got 'above'"),
     ('kind = "circle", radius = 0.04 }',
      'kind = "spline", points = [[0.04, 0.0], [0.0, 0.04], [-0.04, 0.0]] }',
      r"\[joints\.K\] curve\.points: expected at least 4 points"),

@@ -352,7 +352,7 @@ def test_torn_checkpoint_is_repaired_not_glued(tmp_path):
 ])
 def test_with_params_refuses_paths_without_effect(path, why):
     mech = cd.load(MODELS / "double_folded.toml")
-    with pytest.raises(cd.ModelError, match=rf"\[sweep\] {path}: has no effect: {why}"):
+    with pytest.raises(cd.ModelError, match=rf"\[parameters\] {path}: has no effect: {why}"):
         cd.with_params(mech, {path: 0.5})
 
 

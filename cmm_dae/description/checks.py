@@ -5,6 +5,7 @@ like :class:`cmm_dae.Mechanism` (it is called while one is built)."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -133,6 +134,12 @@ def validate(m: Any) -> list[Problem]:
         if el.first_body == el.second_body:
             out.append(Problem(t, "connects", f"both points are on body '{el.first_body}': "
                                "the element would do nothing"))
+        held = next((jn for jn, j in m.joints.items() if j.type == "revolute"
+                     and {j.first, j.second} == {el.first, el.second}), None)
+        if held is not None:
+            out.append(Problem(t, "connects", f"revolute joint '{held}' holds these two "
+                               "points together: the element's length is always 0 and its "
+                               "direction undefined (connect it to points apart)"))
         for key in ("stiffness", "rest", "damping"):
             val = getattr(el, key)
             if not (_finite(val) and val >= 0):
@@ -152,6 +159,14 @@ def _check_law(t: str, law: Any, target: str) -> list[Problem]:
         if not callable(law.func):
             out.append(Problem(t, "law", f"expected a callable f(t, coordinate, rate), got "
                                f"{type(law.func).__name__}"))
+        else:
+            try:  # called with three numbers: refused here, not as a TypeError mid-run
+                inspect.signature(law.func).bind(0.0, 0.0, 0.0)
+            except TypeError as e:
+                out.append(Problem(t, "law", f"expected a callable f(t, coordinate, rate) "
+                                   f"of three arguments (s, m or rad, m/s or rad/s): {e}"))
+            except ValueError:  # no signature to read (a builtin): called as it is
+                pass
         if target != "joint":
             out.append(Problem(t, "law", "a callable law f(t, coordinate, rate) needs a "
                                "joint: only a load on a joint coordinate can use it"))

@@ -20,7 +20,8 @@ JOINT_TYPES = ("revolute", "prismatic", "contact")
 CURVES = ("circle", "line", "spline")
 
 
-SIDES = ("outside", "inside")
+#: a circle's or a spline's sides, then a line's (where outside, inside read as left, right)
+SIDES = ("outside", "inside", "left", "right")
 
 
 def _finite(x) -> bool:
@@ -110,8 +111,13 @@ def _spline_problems(t: str, j) -> list[Problem]:
     origin and none at it; open, in increasing x, on a bilateral contact whose limits lie
     within the curve's ends."""
     c = j.curve
-    if len(c.points) < 4 or not all(_finite(x) for p in c.points for x in p):
-        return [Problem(t, "curve.points", "expected at least 4 points [x, y] (m)")]
+    if len(c.points) < 4:
+        return [Problem(t, "curve.points", f"expected at least 4 points [x, y] (m), got "
+                        f"{len(c.points)}")]
+    bad = next((i for i, p in enumerate(c.points) if not all(_finite(x) for x in p)), None)
+    if bad is not None:
+        return [Problem(t, f"curve.points[{bad}]", f"expected finite coordinates (m), got "
+                        f"{list(c.points[bad])}")]
     if not isinstance(c.closed, bool):
         return [Problem(t, "curve.closed", f"expected true or false, got {c.closed!r}")]
     if not c.closed:
@@ -169,6 +175,9 @@ def _contact_problems(t: str, j) -> list[Problem]:
         out += _spline_problems(t, j)
     if j.side not in SIDES:
         out.append(Problem(t, "side", f"expected one of {', '.join(SIDES)}, got {j.side!r}"))
+    elif j.side in ("left", "right") and c is not None and c.kind != "line":
+        out.append(Problem(t, "side", f"'{j.side}' is a side of a line (of its direction); "
+                           f"a {c.kind}'s sides are 'outside' and 'inside'"))
     if not isinstance(j.unilateral, bool):
         out.append(Problem(t, "unilateral", f"expected true or false, got {j.unilateral!r}"))
     if j.unilateral and j.limits is not None:

@@ -294,14 +294,14 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
     angle = r.num(t, d, "angle", default=default("joints", "angle"))
     limits = None
     if "limits" in d:
-        lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"),
-                    keys_of("joints", "limits"))
+        lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"), keys_of("joints", "limits"))
         limits = Limits(r.num(f"{t}.limits", lt, "lower", None),
                         r.num(f"{t}.limits", lt, "upper", None))
     restitution = r.num(t, d, "restitution", default=default("joints", "restitution"))
-    if "restitution" in d and limits is None and not unilateral:
-        r.bad(t, "restitution", "a restitution needs 'limits' (or a unilateral contact) to "
-              "act on")
+    ends = curve is not None and curve.kind == "spline" and curve.closed is False  # stops
+    if "restitution" in d and limits is None and not unilateral and not ends:
+        r.bad(t, "restitution", "a restitution needs 'limits' (or a unilateral contact, or "
+              "an open curve's ends) to act on")
     spring = damper = None
     if "spring" in d:
         st = r.keys(f"{t}.spring", r.sub(t, d, "spring"),

@@ -122,9 +122,10 @@ class Joint(_TwoPoints):
         Dry friction (stick/slip, event-located; no regularisation).
     curve : Curve or None
         Contact: the curve of the first body the second point stays on.
-    side : {"outside", "inside"}
-        Contact: the side of the curve the point keeps to (a circle's outside or inside;
-        a line's left of its direction, or its right).
+    side : {"outside", "inside", "left", "right"}
+        Contact: the side of the curve the point keeps to (a circle's or a spline's
+        outside or inside; a line's left or right of its direction, where "outside" and
+        "inside" read as left and right).
     unilateral : bool
         Contact: the point may leave the curve (it lifts off when the contact would have
         to pull, lands again with ``restitution``); its coordinate is then its distance

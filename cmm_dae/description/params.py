@@ -26,7 +26,7 @@ from .schema import LAW_KEYS
 
 _SUB = {"spring": Spring, "damper": Damper, "limits": Limits}
 #: the tables a dotted path may start with (besides ``initial`` and ``gravity``)
-_TABLES = ("bodies", "joints", "drivers", "elements")
+_TABLES = ("bodies", "joints", "drivers", "elements", "gears")
 
 
 #: Scalar numeric fields a dotted path may set, per table (sub-tables as "spring.rest").
@@ -38,6 +38,7 @@ _FIELDS = {
                "curve.radius"),
     "drivers": ("initial", "speed", "amplitude", "frequency", "phase"),
     "elements": ("stiffness", "rest", "damping", "preload"),
+    "gears": ("ratio",),
 }
 
 
@@ -106,9 +107,19 @@ def _point_used(mech: Mechanism, ref: str) -> bool:
         or any(ld.body == body and ld.point == pt for ld in mech.loads.values())
 
 
+def _parts(mech: Mechanism, path: str) -> list[str]:
+    """A dotted path's parts; a gear pair's, which a model file writes as a ``[joints]``
+    entry (``joints.Z.ratio``), as ``gears.Z.ratio``."""
+    parts = path.split(".")
+    if len(parts) > 1 and parts[0] == "joints" and parts[1] in mech.gears \
+            and parts[1] not in mech.joints:
+        parts[0] = "gears"
+    return parts
+
+
 def path_problem(mech: Mechanism, path: str) -> Problem | None:
     """Why a dotted path is not a parameter that can be set (None when it is)."""
-    parts = path.split(".")
+    parts = _parts(mech, path)
     ref = _point_ref(mech, parts)
     if ref is not None:
         return None if _point_used(mech, ref) else Problem(
@@ -118,16 +129,16 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
     if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
             and ".".join(parts[2:]) in _FIELDS[parts[0]]:
         why = _no_effect(mech, parts)
-        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+        return None if why is None else Problem("parameters", path, f"has no effect: {why}")
     if parts[0] == "loads" and len(parts) == 3 and parts[1] in mech.loads \
             and parts[2] in _LAW_FIELDS:
         why = _no_effect(mech, parts)
-        return None if why is None else Problem("sweep", path, f"has no effect: {why}")
+        return None if why is None else Problem("parameters", path, f"has no effect: {why}")
     if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
             and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
                                              and parts[1] in ("x", "y")):
         return None
-    return Problem("sweep", path, f"not a parameter of the mechanism{_hint(mech, parts)}; "
+    return Problem("parameters", path, f"not a parameter of the mechanism{_hint(mech, parts)}; "
                    f"e.g. {', '.join(examples(mech))}")
 
 
@@ -153,14 +164,14 @@ def examples(mech: Mechanism, n: int = 6) -> list[str]:
 def _hint(mech: Mechanism, parts: list[str]) -> str:
     """' (did you mean ...?)' for a misspelt table or name, else ''."""
     names = {"bodies": mech.bodies, "joints": mech.joints, "drivers": mech.drivers,
-             "elements": mech.elements, "loads": mech.loads}
+             "elements": mech.elements, "loads": mech.loads, "gears": mech.gears}
     tables = [*names, "initial", "gravity", GROUND]
     if parts[0] not in tables:
         near = difflib.get_close_matches(parts[0], tables, n=1)
         return f" (no table '{parts[0]}'" + (f": did you mean '{near[0]}'?)" if near else ")")
     if parts[0] in names and len(parts) > 1 and parts[1] not in names[parts[0]]:
         near = difflib.get_close_matches(parts[1], list(names[parts[0]]), n=1)
-        return (f" (no {parts[0][:-1] if parts[0] != 'bodies' else 'body'} '{parts[1]}'"
+        return (f" (no {'body' if parts[0] == 'bodies' else parts[0][:-1]} '{parts[1]}'"
                 + (f": did you mean '{near[0]}'?)" if near else ")"))
     return ""
 
@@ -168,7 +179,7 @@ def _hint(mech: Mechanism, parts: list[str]) -> str:
 def param_value(mech: Mechanism, path: str) -> float:
     """The current value of a dotted model path (see :func:`with_params`); a spring,
     damper or limit that does not exist reads as 0 (stiffness, damping) or NaN."""
-    parts = path.split(".")
+    parts = _parts(mech, path)
     bad = path_problem(mech, path)
     if bad is not None:
         raise ModelError(bad, mech.source)
@@ -197,7 +208,8 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     ``joints.NAME.limits.lower|upper``,
     ``joints.NAME.friction.static|kinetic|mu_static|mu_kinetic|radius``,
     ``drivers.JOINT.speed|initial|amplitude|...``,
-    ``elements.NAME.stiffness|rest|damping|preload``, ``initial.joints.NAME``,
+    ``elements.NAME.stiffness|rest|damping|preload``, ``gears.NAME.ratio``,
+    ``initial.joints.NAME``,
     ``initial.velocities.NAME``, ``gravity.x|y``, a load's law
     ``loads.NAME.value|mean|amplitude|frequency|phase|stall|no_load_speed`` (as its law
     reads them), point coordinates in their frame
@@ -215,7 +227,7 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     problems = []
     for path, value in values.items():
         if isinstance(value, bool) or not isinstance(value, int | float | np.number):
-            problems.append(Problem("sweep", path, f"expected a number, got {value!r}"))
+            problems.append(Problem("parameters", path, f"expected a number, got {value!r}"))
             continue
         bad = path_problem(mech, str(path))
         if bad is not None:
@@ -240,7 +252,7 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
     ground = dict(mech.ground)
     points: dict[str, dict] = {}  # body -> its points, where some changed
     for path, value in values.items():
-        parts = path.split(".")
+        parts = _parts(mech, path)
         if _point_ref(mech, parts) is not None:
             pts = ground if parts[0] == GROUND else points.setdefault(
                 parts[1], dict(mech.bodies[parts[1]].points))

@@ -142,7 +142,8 @@ SPEC: dict[str, Table] = {
                                        "are stops (false)", default=True)},
                      default=None),
         "side": Key("choice", "contact only: the side of the curve the point keeps to (a "
-                    "circle's outside or inside; left or right of a line's direction)",
+                    "circle's or spline's outside or inside; left or right of a line's "
+                    "direction, where outside and inside read as left and right)",
                     choices=SIDES, default="outside"),
         "unilateral": Key("boolean", "contact only: the point may leave the curve (lift-off "
                           "when the contact would pull, landing with `restitution`); its "

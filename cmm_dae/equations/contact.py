@@ -32,7 +32,7 @@ def contact_gap_arc(j, d, theta1) -> tuple:
         u = np.array(cv.direction, float) / math.hypot(*cv.direction)
         gap = -u[1] * dl[0] + u[0] * dl[1]  # left of the direction
         arc = u[0] * dl[0] + u[1] * dl[1]
-    return (gap if j.side == "outside" else -gap), arc
+    return (gap if j.side in ("outside", "left") else -gap), arc
 
 
 def _spline_gap_arc(cv, dl) -> tuple:

@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from ..core.records import Event, EventKind, Side
-from ..description.parts import stop_tolerance
+from ..description.parts import STOP_TOL, stop_tolerance
 from ..equations.kinematics import (
     dependent_rows,
     project_positions,
@@ -97,7 +97,11 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
     A gap is armed only while its joint approaches the stop (+1 while it moves away): just
     after a release or a rejected root the joint leaves at almost zero speed and round-off
     in the gap would otherwise read as arrivals, one restart after the other. The jump to
-    +1 is never a downward crossing. A push needs the multipliers ``lam`` of a KKT solve.
+    +1 is never a downward crossing. But a joint beyond its stop by more than the
+    integrator resolves (``hs.gap_band``) reads as beyond it whichever way it moves: a
+    follower that fell through a cam within one long step of free flight (a parabola IDA
+    integrates exactly) and was moving out again at the step's end read +1 at both ends,
+    and the landing was lost. A push needs the multipliers ``lam`` of a KKT solve.
 
     Written once for numbers and for CasADi expressions: with ``where=casadi.if_else`` and
     symbolic ``c``, ``cdot``, ``lam`` (``out`` a list) it builds IDA's event function."""
@@ -112,10 +116,14 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
         elif tr.kind == TK.GAP:
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
+            # (a stop's L is a symbol in sensitivities: where(), not max())
+            x = hs.gap_band[0] * abs(L) + hs.gap_band[1]
+            y = STOP_TOL * where(abs(L) > 1.0, abs(L), 1.0)
+            band = where(x > y, x, y)
             if tr.side == "lower":
-                out[i] = where(cdot[k] > 0.0, 1.0, c[k] - L)
+                out[i] = where(cdot[k] > 0.0, where(c[k] - L > -band, 1.0, c[k] - L), c[k] - L)
             else:
-                out[i] = where(cdot[k] < 0.0, 1.0, L - c[k])
+                out[i] = where(cdot[k] < 0.0, where(L - c[k] > -band, 1.0, L - c[k]), L - c[k])
         else:  # friction holds a joint on its stop until the pull beats it
             out[i] = hs.push(lam, tr.joint) + hs.static(tr.joint, lam)
 

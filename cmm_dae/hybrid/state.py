@@ -149,6 +149,10 @@ class HybridState:
     params: list[np.ndarray] = field(default_factory=list)
     bounces: dict[str, list[float]] = field(default_factory=dict)  # joint -> bounce times
     stayed: dict[str, float] = field(default_factory=dict)
+    #: (relative to |L|, absolute) m or rad: a joint beyond its stop by more than this
+    #: (and the stop tolerance) reads as beyond it even while it moves away (IDA's gap
+    #: resolution; by default never, as the fixed-step algorithm reads it)
+    gap_band: tuple[float, float] = (0.0, math.inf)
     _index: dict[tuple, int] = field(default_factory=dict)
     _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
 

@@ -86,6 +86,38 @@ class Recorder:
         # accelerations and multipliers of runs of samples, solved already (first index,
         # a, lambda): the stepped-over screen's KKT solves, which post-processing reuses
         self._kkt: list[tuple[int, np.ndarray, np.ndarray]] = []
+        # the states at which watched multipliers (the drivers') were largest and smallest
+        # over the integrator's steps: (value, t, q, v, configuration) per row 2 i, 2 i + 1
+        self._peaks: tuple[np.ndarray, ...] | None = None
+
+    def better_peaks(self, value: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Which of a segment's extremes of the watched multipliers (rows 2 i: largest,
+        2 i + 1: smallest, of the i-th; at times ``t``, NaN where none) beat the run's."""
+        ok = np.isfinite(t)
+        if self._peaks is None:
+            return ok
+        old = self._peaks[0]
+        return ok & (np.isnan(old) | np.where(np.arange(t.size) % 2 == 0, value > old,
+                                               value < old))
+
+    def add_peaks(self, rows: np.ndarray, value: np.ndarray, t: np.ndarray, q: np.ndarray,
+                  v: np.ndarray, c: int) -> None:
+        """Keep the extremes ``rows`` (of :meth:`better_peaks`; ``q``, ``v`` their states,
+        one row each) of a segment in configuration ``c`` as the run's."""
+        if self._peaks is None:
+            n = rows.size
+            self._peaks = (np.full(n, np.nan), np.full(n, np.nan), np.zeros((n, q.shape[1])),
+                           np.zeros((n, v.shape[1])), np.zeros(n, int))
+        for a, b in zip(self._peaks, (value[rows], t[rows], q, v, c), strict=True):
+            a[rows] = b
+
+    def peaks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The states (t, q, v, configuration) where the watched multipliers were
+        extreme over the run's steps (those found), or None."""
+        if self._peaks is None:
+            return None
+        keep = np.isfinite(self._peaks[1])
+        return tuple(a[keep] for a in self._peaks[1:])
 
     def keep_kkt(self, n0: int, a: np.ndarray, lam: np.ndarray) -> None:
         """Keep the accelerations (k, nq) and multipliers (k, m) of the samples from index
@@ -201,6 +233,8 @@ class Integrator(ABC):
         self.model, self.hs, self.opts, self.stats = model, hs, opts, stats
         self.policy = Policy(opts.v_lock, resolution=self.time_resolution(opts),
                              gap=self.gap_resolution(opts))
+        if any(self.policy.gap):  # (else the state's default: leaving is never arriving)
+            hs.gap_band = self.policy.gap
 
     @staticmethod
     @abstractmethod

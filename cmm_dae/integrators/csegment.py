@@ -33,10 +33,11 @@ from ..equations.codegen import build_library, function_key
 from ..equations.model import Model
 from ..hybrid import policy as ev
 
-__all__ = ["CHUNK", "CompiledModel", "SegmentRun", "available", "check_version", "driver"]
+__all__ = ["CHUNK", "CompiledModel", "Extremes", "SegmentRun", "available", "check_version",
+           "driver"]
 
 #: cmm_seg_run's own return values besides IDA's flags
-SEG_MORE, SEG_STALLED = 100, 101
+SEG_MORE, SEG_STALLED, SEG_TRAPPED = 100, 101, 102
 #: samples returned to Python at a time (progress bars and Ctrl-C act between chunks)
 CHUNK = 2048
 _SOURCE = Path(__file__).with_name("segment.c")
@@ -96,10 +97,11 @@ def driver(build: bool = True) -> ctypes.CDLL:
         lib.cmm_seg_new.restype = _P
         n, x, c_long = ctypes.c_int, ctypes.c_double, ctypes.c_long
         lib.cmm_seg_new.argtypes = [n, n, n, *[_P] * 8, _D, x, _D, _D, _D, x, x, x, c_long,
-                                    c_long, n, n, _D, n, n, n, _I, _I, n, _I, n, n]
+                                    c_long, n, n, _D, n, n, n, _I, _I, n, _I, n, n, _I, n]
         lib.cmm_seg_run.restype = n
         lib.cmm_seg_run.argtypes = [_P, _D, _D, n, _I, _I, _L]
         lib.cmm_seg_free.restype, lib.cmm_seg_free.argtypes = None, [_P]
+        lib.cmm_seg_extremes.restype, lib.cmm_seg_extremes.argtypes = None, [_P, _D, _D, _D]
         _driver = lib
     return _driver
 
@@ -135,6 +137,34 @@ class SegmentRun:
     steps: int
     interrupted: bool = False
     stalled: bool = False
+    #: IDA stuck at order 1 with an error-test failure at nearly every step (segment.c)
+    trapped: bool = False
+    #: the watched unknowns' extremes over IDA's steps (:class:`Extremes`), or None
+    extremes: Extremes | None = None
+
+
+@dataclass
+class Extremes:
+    """The largest and smallest value of each watched unknown of y over a segment's IDA
+    steps (rows 2 i and 2 i + 1 for the i-th): ``value``, the step's time ``t`` (s; NaN
+    where no step was taken) and its recorded unknowns ``y`` (coordinates, rates, works)."""
+    value: np.ndarray
+    t: np.ndarray
+    y: np.ndarray
+
+    @classmethod
+    def of_steps(cls, T: np.ndarray, Y: np.ndarray, watch: np.ndarray, ncol: int
+                 ) -> Extremes:
+        """The extremes among the steps (T, full rows Y) of the Python path."""
+        w = len(watch)
+        value, t, y = np.empty(2 * w), np.full(2 * w, np.nan), np.full((2 * w, ncol), np.nan)
+        value[0::2], value[1::2] = -np.inf, np.inf
+        if T.size:
+            X = Y[:, watch]
+            for j, pick in enumerate((np.argmax, np.argmin)):
+                k = pick(X, axis=0)
+                value[j::2], t[j::2], y[j::2] = X[k, np.arange(w)], T[k], Y[k, :ncol]
+        return cls(value, t, y)
 
 
 class CompiledModel:
@@ -198,12 +228,14 @@ class CompiledModel:
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,
             max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
-            band: bool = False, suppress: bool = True) -> SegmentRun:
+            band: bool = False, suppress: bool = True,
+            watch: np.ndarray | None = None) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
         Jacobian is factored as a band where reordering makes it one (:attr:`band`);
-        ``suppress``: the multipliers out of the error test (:mod:`.suppress`)."""
+        ``suppress``: the multipliers out of the error test (:mod:`.suppress`);
+        ``watch``: entries of y whose extremes over IDA's steps are returned."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
@@ -211,6 +243,7 @@ class CompiledModel:
         # contiguous copies, locals of this call: alive while the C side points at them
         p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float)
                                        for a in (p, y0, yp0, atol, tspan[1:]))
+        watch_ = np.ascontiguousarray(np.zeros(0) if watch is None else watch, dtype=np.intc)
         seg = lib.cmm_seg_new(
             N, ne, model.ida.lam.start, self.res[0], self.res[1], self.jac[0], self.jac[1],
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
@@ -218,7 +251,8 @@ class CompiledModel:
             D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed), int(suppress),
             tout_.ctypes.data_as(_D), tout_.size, int(tspan.size == 2), self.rowind.size,
             self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse),
-            *((order[0].ctypes.data_as(_I), order[1], order[2]) if order else (None, 0, 0)))
+            *((order[0].ctypes.data_as(_I), order[1], order[2]) if order else (None, 0, 0)),
+            watch_.ctypes.data_as(_I), watch_.size)
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
         # IDA's coordinates, rates and works are recorded (the differential unknowns)
@@ -244,10 +278,14 @@ class CompiledModel:
                     interrupted, flag = True, 2
                 if flag != SEG_MORE:
                     break
+            ext = Extremes(np.empty(2 * watch_.size), np.empty(2 * watch_.size),
+                           np.empty((2 * watch_.size, ncol)))
+            lib.cmm_seg_extremes(seg, ext.value.ctypes.data_as(_D), ext.t.ctypes.data_as(_D),
+                                 ext.y.ctypes.data_as(_D))
         finally:
             lib.cmm_seg_free(seg)
-        stalled = flag == SEG_STALLED
-        if stalled or interrupted:
+        stalled, trapped = flag == SEG_STALLED, flag == SEG_TRAPPED
+        if stalled or interrupted or trapped:
             info[:] = 0
             info[0] = -1
             flag = 2
@@ -255,4 +293,4 @@ class CompiledModel:
             np.concatenate(T_blocks), np.concatenate(Y_blocks), int(flag),
             IDAMESSAGES.get(int(flag), f"IDA flag {flag}"),
             info[None, :].copy() if flag == 2 else None, int(stats[1]), int(stats[2]),
-            int(stats[0]), interrupted or stalled, stalled)
+            int(stats[0]), interrupted or stalled, stalled, trapped, ext)

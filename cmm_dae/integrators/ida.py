@@ -28,6 +28,7 @@ from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
 from . import cbuild
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
+from .extremes import driver_watch, keep_extremes
 from .ida_callbacks import IdaCallbacks
 from .ida_steps import (
     CRAWL_STEP,
@@ -108,6 +109,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self._ev_cache: dict[tuple, Buffered] = {}
         # Times where a driver law is only C1 (the end of a table): IDA cannot step over a
         # jump in the prescribed acceleration, so the run restarts there.
+        self.watch = driver_watch(model)  # the drivers' multipliers: their peaks are kept
+        self.v_raise = 1.0  # the velocities' atol factor, raised where IDA was trapped
         self.breaks = sorted({d.times[-1] for d in model.mech.drivers.values()
                               if d.motion == "table" and 0.0 < d.times[-1] < opts.t_end})
 
@@ -119,7 +122,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         a lock force is within the margin of its threshold. Cached per configuration."""
         hs, model = self.hs, self.model
         k = self.lambda_scale
-        key = self.ev_key = (tuple(self.triggers), hs.mode(), k)
+        key = self.ev_key = (tuple(self.triggers), hs.mode(), k, hs.gap_band)
         fn = self._ev_cache.get(key)
         if fn is None:
             def build() -> ca.Function:
@@ -219,6 +222,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         W = u.works(Y[keep])
         rec.add_block(T[keep], Q[:-1], V[:-1], hs.current(),
                       work=np.diff(W, axis=0, prepend=np.zeros((1, W.shape[1]))))
+        keep_extremes(rec, self.model, r, float(T[keep][-1]) if keep.size else t0, hs.current())
         t1, q1, v1 = float(T[-1]), Q[-1], V[-1]
         if self.error is not None:
             e = self.error
@@ -247,6 +251,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                 # out covers
                 return SegmentEnd(t1, q1, v1, (), "singular")
             raise SolverError(message, status=status)
+        if r.status == 2 and self.trapped:  # (suppress.TrapCheck) on, velocities looser
+            self.v_raise *= 10.0
+            return SegmentEnd(t1, q1, v1, (), "restart")
         if r.status == 2 and self.stalled:
             raise SolverError(
                 f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
@@ -271,7 +278,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.p[:] = hs.p
         first_step, self.first_step = self.first_step, 0.0
         self.n_steps, self.in_place, self.t_last = 0, 0, -math.inf
-        self.interrupted = self.stalled = self.crawled = False
+        self.interrupted = self.stalled = self.crawled = self.trapped = False
         self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
         # the solver tolerance; restarting from it makes mu ~ Phi / h blow up as h shrinks.
@@ -295,15 +302,13 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.t_start = t0
         # (a segment given its first step is not judged slow again: it fails otherwise)
         self.h_natural = 0.0 if first_step else self._first_step(y0, yp0, t_stop - t0)
-        # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton
-        # failure next to a singular position halved its step down to 1e-17 s and then
-        # took a million such steps in place (A02 at rtol 1e-10). With this floor it fails
-        # there, and the failure is handled as any other.
+        # A step shorter than a quarter of t0's spacing cannot move t: IDA at a Newton failure
+        # next to a singular position halved its step down to 1e-17 s and then took a million
+        # such steps in place (A02 at rtol 1e-10); with this floor it fails there, as any other.
         self.min_step = 0.25 * np.finfo(float).eps * abs(t0)
         self.crawl_step = CRAWL_STEP * np.finfo(float).eps * max(abs(t0), opts.t_end)
         if first_step:
             first_step = max(first_step, 2.0 * self.min_step)
-
         return first_step, q, v, y0, yp0, t_stop
 
     def _solver(self, first_step: float):
@@ -311,16 +316,13 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         Ctrl-C, a spent budget, a crawl or an exception as a clean end."""
         u = self.u
         ne = 1 + len(self.triggers)
-        # scikit-sundae keeps its event history on the function object: a fresh one per
-        # segment, so no event of an earlier segment is seen again. A Ctrl-C inside a
-        # callback would abort IDA and lose the segment's outputs: it is caught here and
-        # turned into a root of the always-positive first event function instead, so IDA
-        # returns what it has and the run stops with everything computed so far.
-        # An exception in the residual (a user's load law failing, say) is kept and ends
-        # the segment the same way, through the next root check; the samples after the
-        # last step completed before it are dropped.
-        self.error: Exception | None = None
-        self.t_error = math.inf  # the last step completed before the error
+        # scikit-sundae keeps its event history on the function object: a fresh one per segment,
+        # so no event of an earlier segment is seen again. A Ctrl-C inside a callback would
+        # abort IDA and lose the segment's outputs: it is caught here and turned into a root of
+        # the always-positive first event function, so IDA returns what it has and the run
+        # stops with everything so far. An exception in the residual (a user's load law
+        # failing) ends the segment the same way; samples after the last step before it go.
+        self.error, self.t_error = None, math.inf  # (t_error: the last step before it)
 
         def eventsfn(t, y, yp, out):
             try:
@@ -381,8 +383,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             else:
                 with quiet_sundials():
                     start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
-                    r = (_own_steps(solver, tspan, y0, yp0, self._interrupt)
-                         if self.opts.output_dt is None else solver.solve(tspan, y0, yp0))
+                    r = _own_steps(solver, tspan, y0, yp0, self._interrupt,
+                                   self.opts.output_dt is not None, self.watch,
+                                   self.u.lam.start, self._trap)
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly
@@ -393,8 +396,3 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.stats.nfev += int(r.nfev)
         self.stats.njev += int(r.njev)
         return r
-
-    def _interrupt(self) -> None:
-        """Ctrl-C arrived outside IDA's callbacks: the segment ends with what it has."""
-        self.interrupted = True
-

@@ -116,13 +116,21 @@ class IdaCallbacks:
         nz = self.u.nz
         cur = self.atol[:2 * nz]
         new = np.empty_like(cur)
-        for blk in (slice(0, nz), slice(nz, 2 * nz)):
+        for blk, raise_ in ((slice(0, nz), 1.0), (slice(nz, 2 * nz), self.v_raise)):
             floor = ROUNDOFF_ATOL * float(np.max(np.abs(y[blk]), initial=0.0))
-            new[blk] = np.maximum(self.opts.atol, floor) * self.tol_scale
+            new[blk] = np.maximum(self.opts.atol, floor) * self.tol_scale * raise_
         raised = bool(np.any(new > OUTGROWN * cur))
         if not check:
             self.atol[:2 * nz] = new
         return raised
+
+    def _interrupt(self) -> None:
+        """Ctrl-C arrived outside IDA's callbacks: the segment ends with what it has."""
+        self.interrupted = True
+
+    def _trap(self) -> None:
+        """IDA stuck at order 1 (:class:`~.suppress.TrapCheck`): the segment ends there."""
+        self.trapped = True
 
     def _first_step(self, y0: np.ndarray, yp0: np.ndarray, span: float) -> float:
         """:func:`~.tolerances.natural_step` of the coordinates at a consistent start."""
@@ -149,7 +157,8 @@ class IdaCallbacks:
         r = self.c.run(self.p, tspan, y0, yp0, self.atol, self.rtol, first_step,
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress,
-                       band=self.linear_solver == "band", suppress=self.suppress)
+                       band=self.linear_solver == "band", suppress=self.suppress,
+                       watch=self.watch)
         self.n_steps = r.steps
-        self.stalled, self.interrupted = r.stalled, r.interrupted
+        self.stalled, self.interrupted, self.trapped = r.stalled, r.interrupted, r.trapped
         return r

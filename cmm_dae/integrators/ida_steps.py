@@ -24,6 +24,8 @@ from ..equations.kinematics import project_state, row_names, singular_ratio
 from ..equations.model import Model
 from ..hybrid import policy as ev
 from .contract import RunOptions
+from .extremes import Tracker
+from .suppress import Interpolant, TrapCheck
 from .tolerances import lambda_scale
 
 __all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOFF_ATOL",
@@ -186,33 +188,61 @@ def segment_times(opts: RunOptions, t0: float, t_stop: float
 
 
 def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
-               interrupted=lambda: None):
-    """IDA's own steps from tspan[0] to tspan[-1], as ``solver.solve`` returns them for a
-    two-point span, but kept in lists: scikit-sundae grows its output arrays by 500 rows
-    at a time with a copy of all rows before, so its cost per step grew with the run
-    (54 us per step over 100 s, 135 over 1000 s). The same IDA calls (one step at a time,
-    the end as stop time), so the same steps; a root, the stop time or a failure ends it.
-    A Ctrl-C between two steps ends it as a root would, ``interrupted()`` told, the steps
-    so far kept."""
+               interrupted=lambda: None, grid: bool = False,
+               watch: np.ndarray | None = None, ncol: int = 0, trapped=lambda: None):
+    """IDA stepping on its own from tspan[0] to tspan[-1] (the end as stop time; a root,
+    the stop time or a failure ends it): its steps, or with ``grid`` the output times
+    ``tspan[1:]`` read from IDA's interpolant after the step that passes them (and the
+    instant of a root or failure), as the compiled segment does. Never ``solve`` on the
+    grid: IDA looks for roots at each output time as at a step, so a grazing contact was
+    found or missed depending on the grid. Kept in lists: scikit-sundae grows its output
+    arrays by 500 rows at a time with a copy of all rows before (its cost per step grew
+    with the run: 54 us per step over 100 s, 135 over 1000 s). A Ctrl-C between two
+    steps ends it as a root would, ``interrupted()`` told, the samples so far kept. The
+    extremes of the entries ``watch`` of y over the steps come back as ``extremes``. IDA
+    stuck at order 1 (:class:`~.suppress.TrapCheck`) ends it too, ``trapped()`` told."""
     t_end = float(tspan[-1])
     first = solver.init_step(float(tspan[0]), y0, yp0)
     ts, ys = [first.t], [first.y]
-    x = first
+    x, nxt = first, 1
+    watch = np.zeros(0, int) if watch is None else watch
+    dky = Interpolant(solver, y0.size) if grid or watch.size else None
+    track = Tracker(watch, ncol, dky, float(tspan[0]))
+    trap, nst = TrapCheck(solver), 0
     try:
         while True:
             x = solver.step(t_end, method="onestep", tstop=t_end)
-            ts.append(x.t)
-            ys.append(x.y)
+            nst += 1
+            if x.status == 0 and trap(nst):
+                trapped()
+                x = SimpleNamespace(t=x.t, y=x.y, status=2, message="", i_events=None,
+                                    nfev=x.nfev, njev=x.njev)
+            if x.status >= 0:
+                track.add(x.t, x.y)
+            if not grid:
+                ts.append(x.t)
+                ys.append(x.y)
+            else:
+                at = x.status in (0, 1)  # a step or the end: its time may be an output
+                while nxt < tspan.size - 1 + at and (tspan[nxt] <= x.t if at
+                                                     else tspan[nxt] < x.t):
+                    ts.append(float(tspan[nxt]))
+                    ys.append(dky(float(tspan[nxt])))
+                    nxt += 1
+                if not at:  # the instant of a root or a failure
+                    ts.append(x.t)
+                    ys.append(x.y)
             if x.status != 0:
                 break
     except KeyboardInterrupt:
         interrupted()
         # a root return (status 2) that the caller reads as the interruption
         return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
-                               i_events=None, nfev=x.nfev, njev=x.njev)
+                               i_events=None, nfev=x.nfev, njev=x.njev,
+                               extremes=track.extremes())
     return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
                            message=x.message, i_events=x.i_events, nfev=x.nfev,
-                           njev=x.njev)
+                           njev=x.njev, extremes=track.extremes())
 
 
 class _StalledError(Exception):

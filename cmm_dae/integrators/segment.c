@@ -13,6 +13,7 @@
  * The wheel ships no SUNDIALS headers: the few prototypes used are declared here, for
  * SUNDIALS 7 built with double precision, 32-bit indices and no MPI (as scikit-sundae's).
  */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -21,6 +22,7 @@ typedef int sunindextype;
 typedef int SUNComm;
 typedef struct _SUNContext *SUNContext;
 typedef struct _generic_N_Vector *N_Vector;
+typedef struct SUNLogger_ *SUNLogger;
 typedef struct _generic_SUNMatrix *SUNMatrix;
 typedef struct _generic_SUNLinearSolver *SUNLinearSolver;
 typedef int (*IDAResFn)(sunrealtype, N_Vector, N_Vector, N_Vector, void *);
@@ -31,6 +33,9 @@ typedef int (*IDALsJacFn)(sunrealtype, sunrealtype, N_Vector, N_Vector, N_Vector
 int SUNContext_Create(SUNComm comm, SUNContext *ctx);
 int SUNContext_Free(SUNContext *ctx);
 int SUNContext_ClearErrHandlers(SUNContext ctx);
+int SUNContext_SetLogger(SUNContext ctx, SUNLogger logger);
+int SUNLogger_Create(SUNComm comm, int output_rank, SUNLogger *logger);
+int SUNLogger_SetWarningFilename(SUNLogger logger, const char *name);
 N_Vector N_VNew_Serial(sunindextype n, SUNContext ctx);
 void N_VDestroy(N_Vector v);
 sunrealtype *N_VGetArrayPointer(N_Vector v);
@@ -70,9 +75,12 @@ int IDASetMaxNumSteps(void *mem, long int n);
 int IDASetStopTime(void *mem, sunrealtype t);
 int IDASolve(void *mem, sunrealtype tout, sunrealtype *tret, N_Vector y, N_Vector yp, int task);
 int IDAGetRootInfo(void *mem, int *info);
+int IDAGetDky(void *mem, sunrealtype t, int k, N_Vector dky);
 int IDAGetNumSteps(void *mem, long int *n);
 int IDAGetNumResEvals(void *mem, long int *n);
 int IDAGetNumJacEvals(void *mem, long int *n);
+int IDAGetNumErrTestFails(void *mem, long int *n);
+int IDAGetLastOrder(void *mem, int *k);
 void IDAFree(void **mem);
 
 #define IDA_NORMAL 1
@@ -83,6 +91,9 @@ void IDAFree(void **mem);
 /* returned by cmm_seg_run besides IDA's flags */
 #define SEG_MORE 100    /* the output buffer is full: call again */
 #define SEG_STALLED 101 /* the run's step budget is spent */
+#define SEG_TRAPPED 102 /* order 1, an error-test failure at nearly every step */
+/* steps over which the trap is judged (at least 4/5 of them with a failure) */
+#define TRAP_WINDOW 500
 
 /* a CasADi-generated function and its work-size query */
 typedef int (*cafun)(const double **arg, double **res, long long *iw, double *w, int mem);
@@ -118,11 +129,19 @@ typedef struct {
     SUNMatrix A;
     SUNLinearSolver LS;
     int *dir;
-    /* outputs */
+    /* outputs: IDA steps on its own (roots are looked for at its steps only, never at an
+     * output time, so the events do not depend on the grid); the output times a step
+     * passed are read from IDA's interpolant (tmp) before the next step */
     const double *tout;
-    int nout, next, onestep;
-    double tend;
-    long budget;
+    int nout, next, onestep, pending, pflag;
+    double tend, tcur, tprev;
+    N_Vector tmp;
+    /* the watched unknowns' largest and smallest values at IDA's steps (wv[2i], wv[2i+1]),
+     * their times and the recorded entries of y there (rows of ncol) */
+    int nwatch, have_d;
+    const int *watch;
+    double *wv, *wt, *wy, *d0, *d1;
+    long budget, trap_nst, trap_nef;
     int done, flag;
 } Seg;
 
@@ -228,6 +247,20 @@ static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *
     return 0;
 }
 
+/* The process's logger for SUNDIALS' warnings, to /dev/null (made once; NULL where it
+ * cannot be: the warnings then go where SUNDIALS sends them) */
+static SUNLogger quiet_logger(void) {
+    static SUNLogger logger = NULL;
+    static int tried = 0;
+    if (!tried) {
+        tried = 1;
+        if (SUNLogger_Create(0, 0, &logger) != 0
+            || SUNLogger_SetWarningFilename(logger, "/dev/null") != 0)
+            logger = NULL;
+    }
+    return logger;
+}
+
 void cmm_seg_free(Seg *s) {
     if (s == NULL) return;
     if (s->mem) IDAFree(&s->mem);
@@ -237,6 +270,8 @@ void cmm_seg_free(Seg *s) {
     if (s->yp) N_VDestroy(s->yp);
     if (s->atol) N_VDestroy(s->atol);
     if (s->id) N_VDestroy(s->id);
+    if (s->tmp) N_VDestroy(s->tmp);
+    free(s->wv); free(s->wt); free(s->wy); free(s->d0); free(s->d1);
     if (s->ctx) SUNContext_Free(&s->ctx);
     fn_free(&s->res); fn_free(&s->jac); fn_free(&s->ev); fn_free(&s->evx);
     free(s->dir);
@@ -251,7 +286,8 @@ void cmm_seg_free(Seg *s) {
  * on one thread, as scikit-sundae's "sparse", else by dense LU; perm (not NULL): IDA's
  * unknowns and residuals reordered (its i-th is the mechanism's perm[i]) into a band of
  * half widths ml and mu, solved by band LU; suppress: the algebraic unknowns (the
- * multipliers) out of IDA's local error test. Returns NULL when SUNDIALS cannot be set up
+ * multipliers) out of IDA's local error test; watch (nwatch entries of y, the mechanism's
+ * order): their extremes over IDA's steps are kept (cmm_seg_extremes). Returns NULL when SUNDIALS cannot be set up
  * (out of memory). */
 Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  cafun res, cawork res_w, cafun jac, cawork jac_w,
@@ -261,7 +297,7 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
                  long budget, int relaxed, int suppress,
                  const double *tout, int nout, int onestep,
                  int nnz, const int *colptr, const int *rowind, int sparse,
-                 const int *perm, int ml, int mu) {
+                 const int *perm, int ml, int mu, const int *watch, int nwatch) {
     Seg *s = calloc(1, sizeof(Seg));
     int i, ok = 1;
     if (s == NULL) return NULL;
@@ -281,6 +317,19 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     s->colptr = colptr;
     s->rowind = rowind;
     s->perm = perm;
+    s->watch = watch;
+    s->nwatch = nwatch;
+    s->wv = malloc(sizeof(double) * 2 * (nwatch > 0 ? nwatch : 1));
+    s->wt = malloc(sizeof(double) * 2 * (nwatch > 0 ? nwatch : 1));
+    s->wy = malloc(sizeof(double) * 2 * (nwatch > 0 ? nwatch : 1) * (nalg_from > 0 ? nalg_from : 1));
+    s->d0 = malloc(sizeof(double) * (nwatch > 0 ? nwatch : 1));
+    s->d1 = malloc(sizeof(double) * (nwatch > 0 ? nwatch : 1));
+    if (!s->wv || !s->wt || !s->wy || !s->d0 || !s->d1) { cmm_seg_free(s); return NULL; }
+    s->tprev = t0;
+    for (i = 0; i < nwatch; i++) {
+        s->wv[2 * i] = -HUGE_VAL; s->wv[2 * i + 1] = HUGE_VAL;
+        s->wt[2 * i] = s->wt[2 * i + 1] = NAN;
+    }
     if (fn_init(&s->res, res, res_w) || fn_init(&s->jac, jac, jac_w)
         || fn_init(&s->ev, ev, ev_w) || fn_init(&s->evx, evx, evx_w)) {
         cmm_seg_free(s);
@@ -288,12 +337,17 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     }
     if (SUNContext_Create(0, &s->ctx)) { cmm_seg_free(s); return NULL; }
     SUNContext_ClearErrHandlers(s->ctx); /* failures are reported by flag, quietly */
+    /* and SUNDIALS' warnings (to standard output by default: "some root functions
+     * identically 0" after a lift-off) are not the user's output either: one logger for
+     * the process that writes them to /dev/null (opening it per segment cost 10 %) */
+    if (quiet_logger() != NULL) SUNContext_SetLogger(s->ctx, quiet_logger());
     s->yy = N_VNew_Serial(N, s->ctx);
     s->yp = N_VNew_Serial(N, s->ctx);
     s->atol = N_VNew_Serial(N, s->ctx);
     s->id = N_VNew_Serial(N, s->ctx);
+    s->tmp = N_VNew_Serial(N, s->ctx);
     s->dir = malloc(sizeof(int) * (ne > 0 ? ne : 1));
-    if (!s->yy || !s->yp || !s->atol || !s->id || !s->dir) { cmm_seg_free(s); return NULL; }
+    if (!s->yy || !s->yp || !s->atol || !s->id || !s->tmp || !s->dir) { cmm_seg_free(s); return NULL; }
     for (i = 0; i < N; i++) { /* in IDA's order */
         int j = perm ? perm[i] : i;
         N_VGetArrayPointer(s->yy)[i] = y0[j];
@@ -359,10 +413,74 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     return s;
 }
 
+/* A candidate y (the mechanism's order) at t for the watched unknown i's extreme j (0: the
+ * largest, 1: the smallest) */
+static void watch_offer(Seg *s, int i, int j, double t, const double *y) {
+    double x = y[s->watch[i]];
+    if (j == 0 ? x > s->wv[2 * i] : x < s->wv[2 * i + 1]) {
+        s->wv[2 * i + j] = x;
+        s->wt[2 * i + j] = t;
+        memcpy(s->wy + (size_t)(2 * i + j) * s->ncol, y, sizeof(double) * s->ncol);
+    }
+}
+
+/* The watched unknowns' derivatives at t (within IDA's last step) into d */
+static int watch_rates(Seg *s, double t, double *d) {
+    const double *x;
+    int i;
+    if (IDAGetDky(s->mem, t, 1, s->tmp) != 0) return -1;
+    x = unperm(s, s->tmp, s->ybuf);
+    for (i = 0; i < s->nwatch; i++) d[i] = x[s->watch[i]];
+    return 0;
+}
+
+/* The watched unknowns' extremes over IDA's step from t0 to t1 (y1: y at t1): the end,
+ * and where IDA's interpolant turns inside the step (its derivative changes sign), the
+ * turning point found by bisection on the derivative. So a short peak between steps is
+ * found, whatever the output grid. */
+static void watch_step(Seg *s, double t0, double t1, const double *y1) {
+    int i, j, it;
+    for (i = 0; i < s->nwatch; i++) {
+        watch_offer(s, i, 0, t1, y1);
+        watch_offer(s, i, 1, t1, y1);
+    }
+    /* the rate at the step's start: the last step's end rate (one interpolation less a
+     * step; the two polynomials agree there to the tolerance, which is all a sign needs) */
+    int had = s->have_d;
+    if (had) memcpy(s->d0, s->d1, sizeof(double) * s->nwatch);
+    s->have_d = 0;
+    if (!(t1 > t0) || (!had && watch_rates(s, t0, s->d0)) || watch_rates(s, t1, s->d1))
+        return;
+    s->have_d = 1;
+    for (i = 0; i < s->nwatch; i++)
+        for (j = 0; j < 2; j++) {
+            double a = t0, b = t1, da = s->d0[i], db = s->d1[i];
+            if (!(j == 0 ? da > 0.0 && db < 0.0 : da < 0.0 && db > 0.0)) continue;
+            for (it = 0; it < 60 && b - a > 0.0; it++) {
+                double m = 0.5 * (a + b), dm;
+                if (m <= a || m >= b || IDAGetDky(s->mem, m, 1, s->tmp) != 0) break;
+                dm = unperm(s, s->tmp, s->ybuf)[s->watch[i]];
+                if ((dm > 0.0) == (da > 0.0)) a = m; else b = m;
+            }
+            if (IDAGetDky(s->mem, 0.5 * (a + b), 0, s->tmp) == 0)
+                watch_offer(s, i, j, 0.5 * (a + b), unperm(s, s->tmp, s->ybuf));
+        }
+}
+
+/* The extremes kept (see cmm_seg_new's watch): values, times, recorded rows of y */
+void cmm_seg_extremes(Seg *s, double *v, double *t, double *y) {
+    memcpy(v, s->wv, sizeof(double) * 2 * s->nwatch);
+    memcpy(t, s->wt, sizeof(double) * 2 * s->nwatch);
+    memcpy(y, s->wy, sizeof(double) * 2 * s->nwatch * s->ncol);
+}
+
 /* Advance, writing up to cap samples (t into T, the first ncol entries of y into Y row by
- * row); *n gets how many.
- * Returns SEG_MORE when the buffer filled first, SEG_STALLED past the step budget, else
- * the final IDA flag (0 at the end, IDA_TSTOP_RETURN, IDA_ROOT_RETURN with the root
+ * row); *n gets how many: every IDA step (onestep), else the output times and, where the
+ * segment ends at a root, a failure or the budget, that instant.
+ * Returns SEG_MORE when the buffer filled first, SEG_STALLED past the step budget,
+ * SEG_TRAPPED where IDA is stuck at order 1 failing its error test at nearly every step
+ * (round-off in the error estimate: the caller loosens the velocities' atol), else
+ * the final IDA flag (IDA_TSTOP_RETURN at the end, IDA_ROOT_RETURN with the root
  * information in info[ne], or a negative failure flag, the last sample being where IDA
  * stopped). stats: steps, residual and Jacobian evaluations. */
 int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *stats) {
@@ -372,25 +490,61 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
     *n = 0;
     if (s->done) return s->flag;
     while (k < cap) {
-        if (s->onestep)
-            flag = IDASolve(s->mem, s->tend, &tt, s->yy, s->yp, IDA_ONE_STEP);
-        else
-            flag = IDASolve(s->mem, s->tout[s->next], &tt, s->yy, s->yp, IDA_NORMAL);
-        T[k] = tt;
-        memcpy(Y + (size_t)k * s->ncol, unperm(s, s->yy, s->ybuf), sizeof(double) * s->ncol);
-        k++;
-        if (flag == IDA_ROOT_RETURN) {
-            IDAGetRootInfo(s->mem, info);
-            stop = 1;
-        } else if (flag == IDA_TSTOP_RETURN || flag < 0) {
-            stop = 1;
-        } else if (!s->onestep) {
-            s->next++;
-            if (s->next >= s->nout) stop = 1;
+        if (s->pending) {
+            /* the output times the last step reached (before a root's or a failure's own
+             * instant, which is recorded after them) */
+            int at = s->pflag == 0 || s->pflag == IDA_TSTOP_RETURN;
+            while (k < cap && s->next < s->nout
+                   && (at ? s->tout[s->next] <= s->tcur : s->tout[s->next] < s->tcur)) {
+                if (IDAGetDky(s->mem, s->tout[s->next], 0, s->tmp) != 0) break;
+                T[k] = s->tout[s->next];
+                memcpy(Y + (size_t)k * s->ncol, unperm(s, s->tmp, s->ybuf),
+                       sizeof(double) * s->ncol);
+                k++;
+                s->next++;
+            }
+            if (k >= cap) break;
+            s->pending = 0;
+            if (!at) {
+                T[k] = s->tcur;
+                memcpy(Y + (size_t)k * s->ncol, unperm(s, s->yy, s->ybuf),
+                       sizeof(double) * s->ncol);
+                k++;
+            }
+            if (s->pflag != 0) {
+                flag = s->pflag;
+                stop = 1;
+                break;
+            }
         }
+        flag = IDASolve(s->mem, s->tend, &tt, s->yy, s->yp, IDA_ONE_STEP);
+        if (flag >= 0 && s->nwatch) {
+            watch_step(s, s->tprev, tt, unperm(s, s->yy, s->ybuf));
+            s->tprev = tt;
+        }
+        if (flag == IDA_ROOT_RETURN) IDAGetRootInfo(s->mem, info);
         IDAGetNumSteps(s->mem, &nst);
-        if (!stop && nst > s->budget) { flag = SEG_STALLED; stop = 1; }
-        if (stop) break;
+        if (flag == 0 && nst > s->budget) flag = SEG_STALLED;
+        if (flag == 0 && nst - s->trap_nst >= TRAP_WINDOW) {
+            long nef = 0;
+            int k = 0;
+            IDAGetNumErrTestFails(s->mem, &nef);
+            IDAGetLastOrder(s->mem, &k);
+            if (k == 1 && nef - s->trap_nef >= TRAP_WINDOW * 4 / 5) flag = SEG_TRAPPED;
+            s->trap_nst = nst;
+            s->trap_nef = nef;
+        }
+        if (s->onestep) {
+            T[k] = tt;
+            memcpy(Y + (size_t)k * s->ncol, unperm(s, s->yy, s->ybuf),
+                   sizeof(double) * s->ncol);
+            k++;
+            if (flag != 0) { stop = 1; break; }
+        } else {
+            s->pending = 1;
+            s->pflag = flag;
+            s->tcur = tt;
+        }
     }
     IDAGetNumSteps(s->mem, &stats[0]);
     IDAGetNumResEvals(s->mem, &stats[1]);

@@ -103,7 +103,8 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                  params: list[np.ndarray], events: list[Event], stats: Stats,
                  status: Status = Status.SUCCESS, message: str = "success",
                  event_sample: np.ndarray | None = None,
-                 work: np.ndarray | None = None, solved: tuple | None = None) -> Result:
+                 work: np.ndarray | None = None, solved: tuple | None = None,
+                 peaks: tuple | None = None) -> Result:
     """Post-process sampled states into a :class:`Result`.
 
     Parameters
@@ -114,7 +115,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
     work : (n, 4) each sample's works (J) since the sample before it as the integrator
     integrated them (drivers, loads, dampers, kinetic friction; NaN where it did not);
     solved : the accelerations (n, nq) and multipliers (n, m) the run solved already by
-    the same batch (the stepped-over screen's; NaN rows where it did not).
+    the same batch (the stepped-over screen's; NaN rows where it did not); peaks : (t, q,
+    v, config) of states between samples where the drivers' efforts were extreme over the
+    integrator's steps (their efforts are solved as the samples' are).
 
     Running out of memory here, after the run, keeps the run: the Result then holds the
     sampled states alone (``t``, ``q``, ``v``, configurations, events, works), its status
@@ -136,6 +139,9 @@ def build_result(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray,
                    + ("" if status == Status.SUCCESS else f" (the run: {message})"))
         status = Status.NUMERICAL
     data["event_sample"], data["work_step"] = event_sample, work
+    if peaks is not None and peaks[0].size and "effort" in data and model.driver_names:
+        data["peak_t"] = peaks[0]
+        data["peak_effort"] = _series(model, *peaks, configurations, params)["effort"]
     return Result(_meta(model), data, configurations, events, stats, status, message)
 
 

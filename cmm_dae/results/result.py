@@ -41,9 +41,16 @@ class JointSeries:
 
 @dataclass(frozen=True)
 class DriverSeries:
-    """Effort (n,) N m or N the driver applies to the second body in the + joint direction."""
+    """Effort (n,) N m or N the driver applies to the second body in the + joint direction
+    at the samples; ``low`` and ``high`` (N m or N) its extremes over the whole solution
+    (every IDA step and event, not only the output grid, which can miss a short peak),
+    at the times ``t_low`` and ``t_high`` (s)."""
 
     effort: np.ndarray
+    low: float = float("nan")
+    high: float = float("nan")
+    t_low: float = float("nan")
+    t_high: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -195,7 +202,8 @@ class Result:
     def _index(self, kind: str, name: str) -> int:
         names = list(getattr(self.layout, kind, ()))
         if name not in names:
-            raise CmmError(f"no {kind[:-1]} named {name!r} (known: {', '.join(names)})")
+            what = "body" if kind == "bodies" else kind[:-1]
+            raise CmmError(f"no {what} named {name!r} (known: {', '.join(names)})")
         return names.index(name)
 
     def joint(self, name: str) -> JointSeries:
@@ -224,7 +232,16 @@ class Result:
 
     def driver(self, name: str) -> DriverSeries:
         """Time series of the driver of joint ``name``."""
-        return DriverSeries(self.data["effort"][:, self._index("drivers", name)])
+        k = self._index("drivers", name)
+        e, t = self.data["effort"][:, k], self.t
+        if "peak_effort" in self.data:  # the states where IDA's steps found the extremes
+            e, t = (np.concatenate([e, self.data["peak_effort"][:, k]]),
+                    np.concatenate([t, self.data["peak_t"]]))
+        if not e.size:
+            return DriverSeries(self.data["effort"][:, k])
+        lo, hi = int(np.argmin(e)), int(np.argmax(e))
+        return DriverSeries(self.data["effort"][:, k], float(e[lo]), float(e[hi]),
+                            float(t[lo]), float(t[hi]))
 
     def body(self, name: str) -> BodySeries:
         """Time series of body ``name`` (its frame, not its centroid)."""

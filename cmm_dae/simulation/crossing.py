@@ -43,7 +43,8 @@ def cross_singular(hs: ev.HybridState, integ: Integrator, t: float, q: np.ndarra
     def cross(t: float, q: np.ndarray, v: np.ndarray, node_ratio: float = NODE_RATIO
               ) -> Crossing:
         return step_over(hs.model, hs.p, t, q, v, opts.t_end, opts.branch, rtol=opts.rtol,
-                         atol=opts.atol, t_min=t_min, node_ratio=node_ratio)
+                         atol=opts.atol, t_min=t_min, node_ratio=node_ratio,
+                         method=integ.method)
 
     first: Crossing | None = None
     try:

@@ -2,11 +2,11 @@
 
 It owns, once for every method, what a run is: checking the options, building the model,
 the consistent initial state, the hybrid loop's bookkeeping (the event policy of
-:mod:`cmm_dae.hybrid.policy` applied to whatever the integrator detected, one output sample after
-every event), failure wrapping (every exception inside a run becomes a
+:mod:`cmm_dae.hybrid.policy` applied to what the integrator detected, a sample after each
+event), failure wrapping (every exception inside a run becomes a
 :class:`~cmm_dae.core.errors.SolverError` carrying the partial Result) and the Result itself.
-An integrator (:mod:`cmm_dae.integrators.ida`, :mod:`cmm_dae.integrators.iterative`) only
-advances the state to the end time or to the next trigger.
+An integrator (:mod:`cmm_dae.integrators.ida`, ``.iterative``) only advances the state to
+the end time or to the next trigger.
 """
 
 from __future__ import annotations
@@ -304,13 +304,13 @@ def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], sta
     inside a :class:`SolverError` where the run failed and ``throw`` asks for it."""
     integ.after_run(time.perf_counter() - wall0)
     res = build_result(model, *rec.arrays(model.nq), hs.configurations, hs.params, events, stats,
-                       status, message, after, rec.works(), rec.kkt(model.nq, model.m))
+                       status, message, after, rec.works(), rec.kkt(model.nq, model.m),
+                       rec.peaks())
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
     # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
     res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if integ.method == "ida"
                               else None)
-    # how IDA ran: its linear solver, and whether its segments ran in C (compiled=True
-    # falls back to the Python path where it cannot be built)
+    # IDA's linear solver; whether its segments ran in C (else the Python path's fallback)
     res.meta["linsolver"] = getattr(integ, "linear_solver", None)
     res.meta["compiled"] = getattr(integ, "c", None) is not None
     stats.wall_time = time.perf_counter() - wall0  # the whole run, post-processing included

@@ -115,15 +115,16 @@ class Start:
     a0: np.ndarray  #: the accelerations there
     vnorm: float
     rate: float  #: the ratio's rate along the motion, 1/s (it falls about linearly)
+    method: str = "ida"  #: the integrator that stopped here (its name in messages)
 
     @classmethod
     def at(cls, model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
-           rule: tuple[str, int] | None) -> Start:
+           rule: tuple[str, int] | None, method: str = "ida") -> Start:
         r0 = ratio(model, q, t, p)
         a0 = model.kkt(q, v, t, p)[0]
         vnorm = float(np.max(np.abs(v), initial=0.0))
         rate = ratio_rate(model, p, t, q, v, a0, r0) if vnorm > 0.0 else 0.0
-        return cls(model, p, t, q, v, rule, r0, a0, vnorm, rate)
+        return cls(model, p, t, q, v, rule, r0, a0, vnorm, rate, method)
 
     @functools.cached_property
     def labels(self) -> list[str]:
@@ -139,11 +140,13 @@ class Start:
     def not_singular(self, where: str) -> SolverError:
         """IDA's failure here, where no singular position lies ``where`` ("ahead"): the
         constraints' ratio is only low (see :data:`NO_COLLAPSE`)."""
-        return SolverError(f"IDA could not continue at t = {self.t:.9g} s and no singular "
+        who, advice = (("the fixed-step algorithm", "its step; a smaller dt may pass")
+                       if self.method == "iterative"
+                       else ("IDA", "these tolerances; another rtol may pass"))
+        return SolverError(f"{who} could not continue at t = {self.t:.9g} s and no singular "
                            f"position lies {where} (the constraints' singular-value ratio "
                            f"{self.r0:.1e} does not collapse there): the forces may be too "
-                           "stiff for these tolerances; another rtol may pass",
-                           status=Status.INTEGRATOR)
+                           f"stiff for {advice}", status=Status.INTEGRATOR)
 
     def dead(self, why: str) -> SolverError:
         return SolverError(f"dead point at t = {self.t:.9g} s: the constraints of "

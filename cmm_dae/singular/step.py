@@ -144,7 +144,7 @@ class Crossing:
 def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
               t_end: float, rule: tuple[str, int] | None = None, *, rtol: float = 1e-8,
               atol: float = 1e-10, t_min: float = -math.inf,
-              node_ratio: float = NODE_RATIO) -> Crossing:
+              node_ratio: float = NODE_RATIO, method: str = "ida") -> Crossing:
     """Cross the singular position ahead of the state (t, q, v) on the branch of the motion
     (or the one just behind it that the integrator stepped across; or, where that lies
     before the segment, only carry the motion out of its neighbourhood).
@@ -172,6 +172,8 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
     node_ratio : float
         Smallest singular-value ratio wanted at a Gauss node (:data:`NODE_RATIO`, or
         :data:`FINE_NODE_RATIO` as a last resort).
+    method : str
+        The integrator that stopped there ("ida" or "iterative"), for messages.
 
     Returns
     -------
@@ -184,7 +186,7 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         With status ``dead point`` when no singular position lies ahead or the motion cannot
         continue through it.
     """
-    st = Start.at(model, p, t, q, v, rule)
+    st = Start.at(model, p, t, q, v, rule, method)
     if st.vnorm == 0.0:
         raise st.dead("the mechanism is at rest there")
     past = st.rate >= 0.0
@@ -192,8 +194,8 @@ def step_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarra
         raise st.dead("the motion does not approach a singular position: it cannot go on")
     if past and rule is not None:
         raise st.dead("the integrator had stepped across the instant before it failed, so "
-                      "the branch rule cannot be applied there; a tighter rtol stops it "
-                      "before the instant")
+                      "the branch rule cannot be applied there; a tighter "
+                      f"{'dt' if method == 'iterative' else 'rtol'} stops it before the instant")
     plan = (plan_behind(st, rtol, atol, t_min) if past
             else plan_ahead(st, rtol, atol, node_ratio))
     try:

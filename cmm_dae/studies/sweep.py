@@ -9,6 +9,7 @@ to a checkpoint CSV as they finish, and a rerun with the same file skips the row
 from __future__ import annotations
 
 import csv
+import inspect
 import itertools
 import math
 import os
@@ -27,6 +28,7 @@ from ..core.progress import Bar
 from ..description.mechanism import Mechanism
 from ..description.params import with_params
 from ..results.result import Result
+from ..simulation.options import check_options
 from ..simulation.runner import simulate
 
 Metric = Callable[[Result], Mapping[str, float]]
@@ -53,7 +55,9 @@ def cases_from(params: Mapping[str, Iterable[float]] | list[Mapping[str, float]]
 
 def default_metrics(res: Result) -> dict[str, float]:
     """Switching times per joint and kind (``t_limit_E_1`` = first limit event of E), peak
-    |driving effort| per driver, the largest energy-balance residual."""
+    |driving effort| per driver (over the whole solution: :class:`DriverSeries` ``low`` and
+    ``high`` of :meth:`~cmm_dae.results.result.Result.driver`), the largest energy-balance
+    residual."""
     out: dict[str, float] = {}
     count: dict[tuple[str, str], int] = {}
     for e in res.events:
@@ -61,9 +65,29 @@ def default_metrics(res: Result) -> dict[str, float]:
         count[k] = count.get(k, 0) + 1
         out[f"t_{e.kind}_{e.joint}_{count[k]}"] = e.t
     for d in res.layout.drivers:
-        out[f"peak_effort_{d}"] = float(np.max(np.abs(res.driver(d).effort)))
+        ds = res.driver(d)  # over every IDA step and event, not only the output grid
+        out[f"peak_effort_{d}"] = float(max(abs(ds.low), abs(ds.high)))
     out["energy_residual"] = float(np.max(np.abs(res.energy().residual)))
     return out
+
+
+def _check_run_options(mech: Mechanism, t_end: float, run_options: dict[str, Any]) -> None:
+    """The run options checked once, up front (as :func:`simulate` checks them), so a bad
+    one is one clear error rather than a failed row per case."""
+    sig = inspect.signature(simulate)
+    unknown = sorted(set(run_options) - set(sig.parameters) - {"mech", "t_end"})
+    if unknown:
+        names = ", ".join(k for k in list(sig.parameters)[2:] if k[0] != "_")
+        raise ModelError(Problem("run", unknown[0], "not an option of a run; expected one "
+                                 f"of {names}"))
+    given = {k: p.default for k, p in sig.parameters.items()
+             if k in _OPTION_NAMES}
+    given.update((k, v) for k, v in run_options.items() if k in _OPTION_NAMES)
+    check_options(mech, run_options.get("method", "ida"), t_end, **given)
+
+
+_OPTION_NAMES = ("rtol", "atol", "output_dt", "dt", "output_every", "max_events", "v_lock",
+                 "max_steps", "linsolver", "compiled")
 
 
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
@@ -254,6 +278,7 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
     names = list(dict.fromkeys(k for c in cases for k in c))
     if cases:
         with_params(mech, cases[0])  # a bad path fails here, not in every worker
+    _check_run_options(mech, t_end, run_options)
     ck_path = Path(checkpoint) if checkpoint is not None else None
     done = _read_checkpoint(ck_path, names) if ck_path is not None else {}
     rows: list[dict[str, Any] | None] = [None] * len(cases)

@@ -1,0 +1,143 @@
+"""Small things users met (issue: trust in long runs, item 11), each checked as they met it."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def gear_pair(ratio: float = -0.5) -> cd.Mechanism:
+    return cd.Mechanism(
+        "gears", ground={"A": (0.0, 0.0), "B": (0.09, 0.0)},
+        bodies=[cd.Body("ga", 0.2, 1e-4, points={"O": (0, 0)}),
+                cd.Body("gb", 0.8, 2e-3, points={"O": (0, 0)})],
+        joints=[cd.Joint("A", "revolute", "ground.A", "ga.O"),
+                cd.Joint("B", "revolute", "ground.B", "gb.O")],
+        gears=[cd.Gear("Z", "A", "B", ratio=ratio)],
+        initial=cd.Initial(joints={"A": 0.0}),
+        loads=[cd.Load("motor", cd.Law(value=2.0), joint="A"),
+               cd.Load("brake", cd.Law(value=-1.0), joint="B")])
+
+
+@pytest.mark.parametrize("path", ["gears.Z.ratio", "joints.Z.ratio"])
+def test_a_gear_ratio_is_a_parameter(path):
+    """As the file writes it ([joints.Z]) or as the API keeps it: the pair's closed-form
+    acceleration (2 - r) / (I_A + r^2 I_B) (the brake -1 N m on B) at r = -0.4, to 1e-9."""
+    res = cd.run_dae(cd.with_params(gear_pair(), {path: -0.4}), 0.1, rtol=1e-10,
+                     output_dt=0.05)
+    r = -0.4
+    assert np.allclose(res.joint("A").acceleration, (2.0 - r) / (1e-4 + r * r * 2e-3),
+                       rtol=1e-9)
+    with pytest.raises(cd.ModelError, match=r"\[parameters\] gears\.Y\.ratio: .*no gear 'Y'"):
+        cd.with_params(gear_pair(), {"gears.Y.ratio": 1.0})
+
+
+def test_a_one_argument_load_law_is_refused_up_front():
+    m = gear_pair()
+    with pytest.raises(cd.ModelError, match=r"\[loads\.motor\] law: expected a callable "
+                       r"f\(t, coordinate, rate\) of three arguments"):
+        cd.Mechanism("x", ground=m.ground, bodies=list(m.bodies.values()),
+                     joints=list(m.joints.values()), gears=list(m.gears.values()),
+                     loads=[cd.Load("motor", cd.Law(func=lambda t: 1.0), joint="A")])
+
+
+def test_a_missing_body_is_named_as_a_body():
+    res = cd.run_dae(gear_pair(), 0.01, output_dt=0.01)
+    with pytest.raises(cd.CmmError, match="no body named 'gc'"):
+        res.body("gc")
+
+
+def slot_file(tmp_path, old: str, new: str) -> Path:
+    text = (ROOT / "models" / "curved_slot.toml").read_text()
+    assert old in text
+    f = tmp_path / "slot.toml"
+    f.write_text(text.replace(old, new))
+    return f
+
+
+def test_restitution_at_an_open_curves_ends(tmp_path):
+    """An open spline's ends are stops: a restitution acts there (the pin bounces off the
+    slot's end with -e times its speed)."""
+    f = slot_file(tmp_path, 'curve = { kind = "spline"',
+                  'restitution = 0.5\ncurve = { kind = "spline"')
+    res = cd.run_dae(cd.load(f), 1.0)
+    bounce = next(e for e in res.events if e.kind == "bounce")
+    assert bounce.velocity_after == pytest.approx(-0.5 * bounce.velocity_before, rel=1e-12)
+
+
+def test_a_non_finite_spline_point_is_named(tmp_path):
+    f = slot_file(tmp_path, "[0.165, 0.011]", "[0.165, nan]")
+    with pytest.raises(cd.ModelError, match=r"\[joints\.K\] curve\.points\[1\]: expected "
+                       r"finite coordinates"):
+        cd.load(f)
+
+
+def test_a_lines_sides_are_left_and_right():
+    """side = "left" is a line's outside (the block rests on the line from above), "right"
+    the other side; "left" on a circle is refused."""
+    def block(side: str, curve: dict) -> dict:
+        return {"mechanism": {"name": "block", "gravity": [0.0, -9.81]},
+                "ground": {"points": {"O": [0.0, 0.0]}},
+                "bodies": {"b": {"mass": 1.0, "inertia": 1e-3, "points": {"P": [0.0, 0.0]},
+                                 "guess": [0.0, 0.1, 0.0]}},
+                "joints": {"X": {"type": "prismatic", "connects": ["ground.O", "b.P"],
+                                 "axis": [0.0, 1.0]},
+                           "K": {"type": "contact", "connects": ["ground.O", "b.P"],
+                                 "curve": curve, "unilateral": True, "side": side}},
+                "initial": {"joints": {"X": 0.1}, "velocities": {"X": 0.0}}}
+    line = {"kind": "line", "direction": [1.0, 0.0]}
+    res = cd.run_dae(cd.from_dict(block("left", line)), 0.5)
+    landing = next(e for e in res.events if e.kind in ("landing", "bounce", "limit"))
+    assert landing.t == pytest.approx(math.sqrt(2 * 0.1 / 9.81), abs=1e-8)
+    with pytest.raises(cd.ModelError, match=r"joint 'K' assembles at -0\.1"):
+        cd.run_dae(cd.from_dict(block("right", line)), 0.5)
+    with pytest.raises(cd.ModelError, match=r"\[joints\.K\] side: 'left' is a side of a line"):
+        cd.from_dict(block("left", {"kind": "circle", "radius": 0.05}))
+
+
+def test_an_element_between_points_a_joint_holds_together():
+    m = gear_pair()
+    with pytest.raises(cd.ModelError, match=r"\[elements\.s\] connects: revolute joint 'A' "
+                       r"holds these two points together"):
+        cd.Mechanism("x", ground=m.ground, bodies=list(m.bodies.values()),
+                     joints=list(m.joints.values()),
+                     elements=[cd.Element("s", "ground.A", "ga.O", stiffness=10.0)])
+
+
+def cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cmm_dae.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=120)
+
+
+def test_save_and_csv_to_one_file_are_refused_and_events_reads_any_saved_name(tmp_path):
+    r = cli("run", str(ROOT / "models" / "slider_crank_stop.toml"), "--t-end", "3",
+            "--save", "P", "--csv", "P", cwd=tmp_path)
+    assert r.returncode != 0 and "both be written to" in r.stderr
+    assert not (tmp_path / "P").exists()
+    r = cli("run", str(ROOT / "models" / "slider_crank_stop.toml"), "--t-end", "3",
+            "--save", "r.dat", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cli("events", "r.dat", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "limit" in r.stdout and "E" in r.stdout
+
+
+def test_the_iterative_methods_failures_name_it():
+    """The singular-position crossing's messages name the integrator that stopped."""
+    from cmm_dae.singular.approach import Start
+
+    st = Start(None, None, 1.0, None, None, None, 0.5, None, 1.0, 0.0, "iterative")
+    msg = str(st.not_singular("ahead"))
+    assert "fixed-step algorithm could not continue" in msg and "smaller dt" in msg
+    assert "IDA" not in msg and "rtol" not in msg
+    st = Start(None, None, 1.0, None, None, None, 0.5, None, 1.0, 0.0)
+    assert "IDA could not continue" in str(st.not_singular("ahead"))
