@@ -1,35 +1,22 @@
-"""MkDocs hook: pages generated from the package itself, so the docs cannot drift from it.
+"""MkDocs hook: the site's pages from the Markdown files as the repository holds them.
 
-* ``<!-- model-file-reference -->`` becomes the model-file reference, written from the same
-  description (``cmm_dae.description.schema.SPEC``) the loader and the JSON Schema use;
-* ``<!-- cli-reference -->`` becomes the help of every ``cmm-dae`` command;
-* ``<!-- changelog -->`` becomes CHANGELOG.md.
+The reference sections are generated into the files themselves (docs/generate.py; the
+test suite checks they are current). On the site, the API sections are rendered by
+mkdocstrings from the same names instead of the plain text (``::: NAME`` directives), and
+``<!-- changelog -->`` becomes CHANGELOG.md.
 """
 
 from __future__ import annotations
 
-import argparse
+import re
 from pathlib import Path
 
-
-def _cli_reference() -> str:
-    from cmm_dae.cli import build_parser
-
-    parser = build_parser()
-    out = ["```text", parser.format_help().rstrip(), "```", ""]
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    for name, p in sub.choices.items():
-        out += [f"## `cmm-dae {name}`", "", "```text", p.format_help().rstrip(), "```", ""]
-    return "\n".join(out)
+_API = re.compile(r"<!-- generated: api ([^>]*?) -->\n.*?<!-- /generated -->", re.S)
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
-    if "<!-- model-file-reference -->" in markdown:
-        from cmm_dae.description.schema import reference_markdown
-
-        markdown = markdown.replace("<!-- model-file-reference -->", reference_markdown())
-    if "<!-- cli-reference -->" in markdown:
-        markdown = markdown.replace("<!-- cli-reference -->", _cli_reference())
+    markdown = _API.sub(lambda m: "\n\n".join(f"::: {n}" for n in m.group(1).split()),
+                        markdown)
     if "<!-- changelog -->" in markdown:
         root = Path(config["config_file_path"]).parent
         text = (root / "CHANGELOG.md").read_text()
