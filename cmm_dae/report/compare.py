@@ -147,7 +147,7 @@ class Comparison:
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        figs = plots.comparison_figures(self, out)
+        figs = plots.comparison_figures(self.a, self.b, self.t, self.mask, out)
         figs.update(self.extra_figures)
         name = self.a.layout.mechanism
         la, lb = self.a.stats.method, self.b.stats.method

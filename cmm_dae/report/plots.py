@@ -5,15 +5,11 @@ work-precision diagrams and animations. Matplotlib with the Agg backend (no scre
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.figures import pyplot
 from ..results.result import Result
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .compare import Comparison
 
 STYLE = {0: dict(color="tab:blue", lw=1.6), 1: dict(color="tab:red", lw=1.0, ls="--")}
 
@@ -109,10 +105,9 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
     return path
 
 
-def differences(cmp: Comparison, path: Path) -> Path:
-    """Differences a - b of the driving efforts and metamorphic-joint coordinates."""
-
-    a, b, t = cmp.a, cmp.b, cmp.t
+def differences(a: Result, b: Result, t: np.ndarray, mask: np.ndarray, path: Path) -> Path:
+    """Differences a - b of the driving efforts and metamorphic-joint coordinates on the
+    common grid ``t`` (s), left out where ``mask`` is False (near events)."""
 
     names = [("driver", n) for n in a.layout.drivers] + \
         [("joint", n) for n in a.watched_joints()]  # never empty: watched falls back to all
@@ -128,7 +123,7 @@ def differences(cmp: Comparison, path: Path) -> Path:
             ya, yb = a.joint(n).position, b.joint(n).position
             unit, lab = _unit(a, n), f"joint {n} position"
         d = a.resample(t, ya) - b.resample(t, yb)
-        ax.plot(t, np.where(cmp.mask, d, np.nan), color="k", lw=1.0)
+        ax.plot(t, np.where(mask, d, np.nan), color="k", lw=1.0)
         _event_lines(ax, a)
         ax.set_ylabel(f"diff [{unit}]")
         ax.set_title(f"{lab}: {_label(a)} minus {_label(b)} (near events left out)")
@@ -180,21 +175,23 @@ def timeline(results: list[Result], path: Path) -> Path:
     return path
 
 
-def comparison_figures(cmp: Comparison, out: Path) -> dict[str, Path]:
-    """Every figure of a comparison report, written into ``out``."""
-    res = [cmp.a, cmp.b]
+def comparison_figures(a: Result, b: Result, t: np.ndarray, mask: np.ndarray,
+                       out: Path) -> dict[str, Path]:
+    """Every figure of a comparison report of ``a`` and ``b`` (its common grid ``t`` and
+    ``mask``), written into ``out``."""
+    res = [a, b]
     figs = {}
-    if cmp.a.layout.drivers:  # an undriven mechanism has no driving effort to draw
+    if a.layout.drivers:  # an undriven mechanism has no driving effort to draw
         figs["Driving effort (paper Figs. 16, 23)"] = driving_effort(res, out / "driving.png")
 
-    watched = cmp.a.watched_joints()
+    watched = a.watched_joints()
     if watched:
         figs["Relative motion of the metamorphic joints (paper Fig. 17)"] = joint_motion(
             res, watched, out / "joints.png")
         for j in watched:
             figs[f"Constraint force/torque of joint {j} (paper Figs. 18-19)"] = joint_forces(
                 res, j, out / f"forces_{j}.png")
-    figs["Differences"] = differences(cmp, out / "differences.png")
+    figs["Differences"] = differences(a, b, t, mask, out / "differences.png")
     figs["Event timeline"] = timeline(res, out / "timeline.png")
     return figs
 
