@@ -141,3 +141,24 @@ def test_the_iterative_methods_failures_name_it():
     assert "IDA" not in msg and "rtol" not in msg
     st = Start(None, None, 1.0, None, None, None, 0.5, None, 1.0, 0.0)
     assert "IDA could not continue" in str(st.not_singular("ahead"))
+
+
+def test_ctrl_c_on_the_python_path_keeps_the_run_so_far():
+    """A Ctrl-C (here raised by a load law past 0.5 s) on the Python IDA path: the partial
+    Result holds the samples up to the last step completed (it held the start alone: the
+    grid's samples came back only when IDA's whole call returned)."""
+    def law(t: float, c: float, rate: float) -> float:
+        if t > 0.5:
+            raise KeyboardInterrupt
+        return 2.0 + math.sin(20 * t)
+
+    m = gear_pair()
+    mech = cd.Mechanism("x", ground=m.ground, bodies=list(m.bodies.values()),
+                        joints=list(m.joints.values()), gears=list(m.gears.values()),
+                        initial=m.initial, loads=[cd.Load("motor", cd.Law(func=law), joint="A")])
+    with pytest.raises(cd.SolverError) as info:
+        cd.simulate(mech, 2.0, compiled=False)
+    res = info.value.result
+    assert info.value.status is cd.Status.INTERRUPTED
+    assert 0.4 < res.t[-1] <= 0.5 and res.t.size > 40
+    assert np.all(np.diff(res.t) > 0)

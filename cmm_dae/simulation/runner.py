@@ -228,8 +228,7 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 q, v = _apply(done, t, q, v, events, rec, after, integ, opts)
             if end.reason == "singular":
                 n_events = len(events)
-                # a segment that recorded nothing restarts the last crossing, whose
-                # instant lies before it
+                # a segment that recorded nothing restarts the last crossing (its instant before)
                 cr, kept = cross_singular(hs, integ, t, q, v, opts, rec, events, after, retry,
                                           stalled, -math.inf if stalled else t_seg)
                 if len(events) > n_events:
@@ -250,8 +249,9 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
         status, message, err = e.status, str(e), e
     except Exception as e:  # noqa: BLE001 - every failure inside a run keeps its partial Result
         status, err = Status.NUMERICAL, e
+        more = "; out of memory: a coarser output_dt needs less" * isinstance(e, MemoryError)
         message = (f"numerical failure after t = {rec.last_t:.9g} s (the last state kept): "
-                   f"{type(e).__name__}: {e}")
+                   f"{type(e).__name__}: {e}{more}")
     return _finish(model, hs, rec, events, after, stats, integ, opts, wall0, eq_values,
                    status, message, err, throw)
 
