@@ -37,7 +37,7 @@ __all__ = ["CHUNK", "CompiledModel", "Extremes", "SegmentRun", "available", "che
            "driver"]
 
 #: cmm_seg_run's own return values besides IDA's flags
-SEG_MORE, SEG_STALLED, SEG_TRAPPED = 100, 101, 102
+SEG_MORE, SEG_STALLED, SEG_TRAPPED, SEG_CRAWLED = 100, 101, 102, 103
 #: samples returned to Python at a time (progress bars and Ctrl-C act between chunks)
 CHUNK = 2048
 _SOURCE = Path(__file__).with_name("segment.c")
@@ -102,6 +102,7 @@ def driver(build: bool = True) -> ctypes.CDLL:
         lib.cmm_seg_run.argtypes = [_P, _D, _D, n, _I, _I, _L]
         lib.cmm_seg_free.restype, lib.cmm_seg_free.argtypes = None, [_P]
         lib.cmm_seg_extremes.restype, lib.cmm_seg_extremes.argtypes = None, [_P, _D, _D, _D]
+        lib.cmm_seg_crawl.restype, lib.cmm_seg_crawl.argtypes = None, [_P, x, n, c_long, x]
         _driver = lib
     return _driver
 
@@ -139,6 +140,8 @@ class SegmentRun:
     stalled: bool = False
     #: IDA stuck at order 1 with an error-test failure at nearly every step (segment.c)
     trapped: bool = False
+    #: steps that no longer move t (cmm_seg_crawl): a failure
+    crawled: bool = False
     #: the watched unknowns' extremes over IDA's steps (:class:`Extremes`), or None
     extremes: Extremes | None = None
 
@@ -229,13 +232,14 @@ class CompiledModel:
             max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
             band: bool = False, suppress: bool = True,
-            watch: np.ndarray | None = None) -> SegmentRun:
+            watch: np.ndarray | None = None, crawl: tuple | None = None) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
         Jacobian is factored as a band where reordering makes it one (:attr:`band`);
         ``suppress``: the multipliers out of the error test (:mod:`.suppress`);
-        ``watch``: entries of y whose extremes over IDA's steps are returned."""
+        ``watch``: entries of y whose extremes over IDA's steps are returned; ``crawl``:
+        (crawl step s, steps in place, slow steps, natural step s) of the crawl test."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
@@ -255,6 +259,8 @@ class CompiledModel:
             watch_.ctypes.data_as(_I), watch_.size)
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
+        if crawl is not None:
+            lib.cmm_seg_crawl(seg, D(crawl[0]), int(crawl[1]), int(crawl[2]), D(crawl[3]))
         # IDA's coordinates, rates and works are recorded (the differential unknowns)
         ncol = model.ida.lam.start
         T_blocks, Y_blocks = [np.array([tspan[0]])], [y0_[None, :ncol].copy()]
@@ -284,8 +290,9 @@ class CompiledModel:
                                  ext.y.ctypes.data_as(_D))
         finally:
             lib.cmm_seg_free(seg)
-        stalled, trapped = flag == SEG_STALLED, flag == SEG_TRAPPED
-        if stalled or interrupted or trapped:
+        stalled, trapped, crawled = (flag == SEG_STALLED, flag == SEG_TRAPPED,
+                                     flag == SEG_CRAWLED)
+        if stalled or interrupted or trapped or crawled:
             info[:] = 0
             info[0] = -1
             flag = 2
@@ -293,4 +300,4 @@ class CompiledModel:
             np.concatenate(T_blocks), np.concatenate(Y_blocks), int(flag),
             IDAMESSAGES.get(int(flag), f"IDA flag {flag}"),
             info[None, :].copy() if flag == 2 else None, int(stats[1]), int(stats[2]),
-            int(stats[0]), interrupted or stalled, stalled, trapped, ext)
+            int(stats[0]), interrupted or stalled, stalled, trapped, crawled, ext)

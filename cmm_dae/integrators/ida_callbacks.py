@@ -158,7 +158,9 @@ class IdaCallbacks:
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress,
                        band=self.linear_solver == "band", suppress=self.suppress,
-                       watch=self.watch)
+                       watch=self.watch, crawl=(self.crawl_step, IN_PLACE_STEPS, SLOW_STEPS,
+                                                self.h_natural))
         self.n_steps = r.steps
         self.stalled, self.interrupted, self.trapped = r.stalled, r.interrupted, r.trapped
+        self.crawled = r.crawled
         return r

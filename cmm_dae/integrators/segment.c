@@ -92,6 +92,7 @@ void IDAFree(void **mem);
 #define SEG_MORE 100    /* the output buffer is full: call again */
 #define SEG_STALLED 101 /* the run's step budget is spent */
 #define SEG_TRAPPED 102 /* order 1, an error-test failure at nearly every step */
+#define SEG_CRAWLED 103 /* steps that no longer move t (see cmm_seg_crawl) */
 /* steps over which the trap is judged (at least 4/5 of them with a failure) */
 #define TRAP_WINDOW 500
 
@@ -142,6 +143,10 @@ typedef struct {
     const int *watch;
     double *wv, *wt, *wy, *d0, *d1;
     long budget, trap_nst, trap_nef;
+    /* the crawl (as ida_callbacks' root callback tells it on the Python path) */
+    double crawl_step, h_natural, t_start, t_step;
+    int in_place, in_place_max;
+    long slow_steps;
     int done, flag;
 } Seg;
 
@@ -325,7 +330,7 @@ Seg *cmm_seg_new(int N, int ne, int nalg_from,
     s->d0 = malloc(sizeof(double) * (nwatch > 0 ? nwatch : 1));
     s->d1 = malloc(sizeof(double) * (nwatch > 0 ? nwatch : 1));
     if (!s->wv || !s->wt || !s->wy || !s->d0 || !s->d1) { cmm_seg_free(s); return NULL; }
-    s->tprev = t0;
+    s->tprev = s->t_start = s->t_step = t0;
     for (i = 0; i < nwatch; i++) {
         s->wv[2 * i] = -HUGE_VAL; s->wv[2 * i + 1] = HUGE_VAL;
         s->wt[2 * i] = s->wt[2 * i + 1] = NAN;
@@ -422,6 +427,19 @@ static void watch_offer(Seg *s, int i, int j, double t, const double *y) {
         s->wt[2 * i + j] = t;
         memcpy(s->wy + (size_t)(2 * i + j) * s->ncol, y, sizeof(double) * s->ncol);
     }
+}
+
+/* The crawl test of the Python path's root callback: a step moving t by at most
+ * crawl_step (s) is in place, more than in_place_max of them in a row end the segment, as
+ * do slow_steps steps that have not covered h_natural (s) from the segment's start
+ * (h_natural 0: never). Without it a segment next to a singular position took 500,000
+ * steps in place where the Python path failed and crossed (A02 at rtol 1e-12). */
+void cmm_seg_crawl(Seg *s, double crawl_step, int in_place_max, long slow_steps,
+                   double h_natural) {
+    s->crawl_step = crawl_step;
+    s->in_place_max = in_place_max;
+    s->slow_steps = slow_steps;
+    s->h_natural = h_natural;
 }
 
 /* The watched unknowns' derivatives at t (within IDA's last step) into d */
@@ -524,6 +542,12 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
         }
         if (flag == IDA_ROOT_RETURN) IDAGetRootInfo(s->mem, info);
         IDAGetNumSteps(s->mem, &nst);
+        if (flag == 0 && s->in_place_max > 0) {
+            if (tt - s->t_step > s->crawl_step) s->in_place = 0;
+            else if (++s->in_place > s->in_place_max) flag = SEG_CRAWLED;
+            if (nst == s->slow_steps && tt - s->t_start < s->h_natural) flag = SEG_CRAWLED;
+            s->t_step = tt;
+        }
         if (flag == 0 && nst > s->budget) flag = SEG_STALLED;
         if (flag == 0 && nst - s->trap_nst >= TRAP_WINDOW) {
             long nef = 0;
