@@ -16,6 +16,7 @@ import sys
 from .cli_commands import (
     _animate,
     _bench,
+    _cache,
     _compare,
     _design,
     _events,
@@ -181,6 +182,13 @@ def _studies(sub) -> None:
 
     ex = sub.add_parser("examples", help="list the shipped example models")
     ex.set_defaults(func=_examples)
+
+    ca = sub.add_parser("cache", help="the compiled-library cache: its size, its files, "
+                        "clear it")
+    ca.add_argument("--list", action="store_true", help="list every library, most "
+                    "recently used first")
+    ca.add_argument("--clear", action="store_true", help="remove every cached library")
+    ca.set_defaults(func=_cache)
 
     sc = sub.add_parser("schema", help="print the JSON Schema of model files (or the "
                         "model-file reference with --markdown)")

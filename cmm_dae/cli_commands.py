@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from .core.errors import CmmError
@@ -282,6 +283,27 @@ def _examples(args: argparse.Namespace) -> int:
 
     for name in examples():
         print(f"{name:<28} {example(name)}")
+    return 0
+
+
+def _cache(args: argparse.Namespace) -> int:
+    from .equations import libcache
+    from .equations.codegen import cache_dir
+
+    where = cache_dir()
+    if args.clear:
+        n, freed = libcache.clear()
+        print(f"removed {n} libraries ({freed / 2**20:.1f} MB) from {where}")
+        return 0
+    items = libcache.entries()
+    total = sum(e.size for e in items)
+    print(f"{where}: {len(items)} libraries, {total / 2**20:.1f} MB of "
+          f"{libcache.limit() / 2**20:.0f} MB (CMM_DAE_CACHE_MB; the least recently used "
+          "go first)")
+    if args.list:
+        for e in reversed(items):
+            print(f"  {e.path.name:<34} {e.size / 2**10:9.1f} kB  last used "
+                  f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(e.used))}")
     return 0
 
 

@@ -16,6 +16,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from . import libcache
+from .libcache import cache_dir
+
 
 class Buffered:
     """A CasADi function evaluated through its buffer API (about 3 us instead of 30 us a
@@ -87,12 +90,6 @@ def map_width(k: int, size: int) -> int:
                                       2 * base) if w >= k))
 
 
-def cache_dir() -> Path:
-    """Where compiled libraries are kept: ``$CMM_DAE_CACHE`` (default, also when it is set
-    but empty, ``~/.cache/cmm_dae``)."""
-    return Path(os.environ.get("CMM_DAE_CACHE") or Path.home() / ".cache" / "cmm_dae")
-
-
 def c_compiler() -> list[str] | None:
     """The system C compiler as a command (``$CC``, split like a shell would, so that
     ``CC="gcc -m64"`` works; else ``cc`` or ``gcc``), None when there is none."""
@@ -145,6 +142,7 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
     cache = cache_dir()
     lib = cache / f"cmm_{key}.so"
     if lib.is_file() and verified(lib, key):
+        libcache.touch(lib)  # its last use orders the trimming
         return lib
     if not build:
         raise NotBuiltError(str(lib))
@@ -185,6 +183,8 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
             generated.unlink(missing_ok=True)
         tmp.unlink(missing_ok=True)
         stamp_tmp.unlink(missing_ok=True)
+    libcache.touch(lib)
+    libcache.trim(keep=lib)  # the cache's size cap: the least recently used go
     return lib
 
 
