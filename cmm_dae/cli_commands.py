@@ -215,7 +215,7 @@ def _bench(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         raise CmmError(f"--repeat must be at least 1, not {args.repeat}")
     if args.peers:
-        from .studies.peers import compare_a02, peers_table
+        from .studies.peers import STEPS, compare_a02, peers_table
 
         if args.models or args.chain:
             raise CmmError("--peers runs its own problem (A02 with --loops): give no "
@@ -226,7 +226,8 @@ def _bench(args: argparse.Namespace) -> int:
             raise CmmError(f"--steps must be MuJoCo steps in (0, 1e-3] s, not {args.steps}")
         from .studies.peers_andrews import andrews_table, compare_andrews
 
-        print(peers_table([compare_a02(n, repeat=args.repeat) for n in args.loops]))
+        print(peers_table([compare_a02(n, h=h, repeat=args.repeat) for n in args.loops
+                           for h in STEPS]))
         print()
         print(andrews_table([compare_andrews(h, repeat=args.repeat) for h in args.steps]))
         from .studies.peers_exudyn import compare_a02_exudyn, exudyn_available, exudyn_table
