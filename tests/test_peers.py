@@ -69,8 +69,9 @@ def test_without_mujoco_the_error_says_how_to_get_it(monkeypatch):
 
 def test_mujoco_model_is_andrews_squeezer():
     """The MuJoCo squeezer against the Test Set's y(0.03): within 1.5e-3 rad at h 1e-5 and
-    5e-5 at h 2e-6 (measured 8.7e-4 and 2.9e-5), the error falling as h^2 (the soft loop
-    closures' time constant is 2 h): the same mechanism, its error MuJoCo's own."""
+    5e-5 at h 2e-6 (measured 1.5e-6 and 8.2e-8 with the closures tuned, 8.7e-4 and 2.9e-5
+    with MuJoCo's default impedance), the error falling about as h^2 (the closures' time
+    constant is 2 h): the same mechanism, its error MuJoCo's own."""
     from cmm_dae.studies.peers_andrews import _error, andrews_mujoco
 
     coarse, fine = _error(andrews_mujoco(1e-5)), _error(andrews_mujoco(2e-6))

@@ -146,7 +146,8 @@ def cheapest(error_at, target: float, rtols: tuple[float, ...]
 RATIO_NOTE = ("time ratio: cmm_dae's wall time over MuJoCo's, best of warm runs side by "
               "side; MuJoCo as its users tune it: RK4, loops closed by equality constraints "
               f"of time constant 2 h and impedance {SOLIMP}, the model compiled outside the "
-              "timing (as cmm_dae's build is), the steps by its batched rollout")
+              "timing (as cmm_dae's build is), its steps in one call (its batched rollout, or "
+              "mj_step's nstep)")
 
 
 def header(peer: str = "MuJoCo") -> str:
