@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import cmm_dae as cd
 from cmm_dae.description.library import four_bar_chain  # noqa: F401 - the tests' chain
 
 
@@ -183,3 +184,38 @@ def for_method(method: str, **options) -> dict:
 
     drop = ITERATIVE_DEFAULTS if method == "ida" else IDA_DEFAULTS
     return {k: v for k, v in options.items() if k not in drop}
+
+
+def gear_pair(ratio: float = -0.5) -> cd.Mechanism:
+    """Two gears on ground axles 0.09 m apart (an external mesh at -0.5), a motor of 2 N m
+    on A and a brake of -1 N m on B."""
+    return cd.Mechanism(
+        "gears", ground={"A": (0.0, 0.0), "B": (0.09, 0.0)},
+        bodies=[cd.Body("ga", 0.2, 1e-4, points={"O": (0, 0)}),
+                cd.Body("gb", 0.8, 2e-3, points={"O": (0, 0)})],
+        joints=[cd.Joint("A", "revolute", "ground.A", "ga.O"),
+                cd.Joint("B", "revolute", "ground.B", "gb.O")],
+        gears=[cd.Gear("Z", "A", "B", ratio=ratio)],
+        initial=cd.Initial(joints={"A": 0.0}),
+        loads=[cd.Load("motor", cd.Law(value=2.0), joint="A"),
+               cd.Load("brake", cd.Law(value=-1.0), joint="B")])
+
+
+def spline_cam(w: float = 30.0, follower_mass: float = 0.2) -> cd.Mechanism:
+    """A cam whose profile is a closed spline through 48 points of r = 30 + 6 cos(phi) +
+    2 sin(3 phi) mm about its pivot, turning at ``w`` rad/s under a knife-edge follower on
+    the vertical through the pivot (no spring: it flies between landings)."""
+    phi = np.linspace(0.0, 2 * math.pi, 48, endpoint=False)
+    r = 0.030 + 0.006 * np.cos(phi) + 0.002 * np.sin(3 * phi)
+    pts = tuple(zip(r * np.cos(phi), r * np.sin(phi), strict=True))
+    return cd.Mechanism(
+        "spline cam", ground={"O": (0.0, 0.0)},
+        bodies=[cd.Body("cam", 1.0, 1e-3, points={"O": (0, 0)}),
+                cd.Body("follower", follower_mass, 1e-4, points={"tip": (0.0, 0.0)},
+                        guess=(0.0, 0.04, 0.0))],
+        joints=[cd.Joint("A", "revolute", "ground.O", "cam.O"),
+                cd.Joint("F", "prismatic", "ground.O", "follower.tip", axis=(0.0, 1.0)),
+                cd.Joint("K", "contact", "cam.O", "follower.tip", unilateral=True,
+                         curve=cd.Curve("spline", points=pts))],
+        drivers=[cd.Driver("A", speed=w)],
+        initial=cd.Initial(joints={"K": 0.0}, velocities={"K": 0.0}))

@@ -27,6 +27,8 @@ from scipy.optimize import brentq
 
 import cmm_dae as cd
 
+from refs import spline_cam
+
 E, R, W, G = 0.01, 0.04, 40.0, 9.81  # cam eccentricity m, radius m, speed rad/s; gravity
 M_F = 0.2  # follower mass, kg
 
@@ -205,20 +207,7 @@ def test_spline_cam_against_its_profile(capfd):
     from scipy.interpolate import CubicSpline
 
     w = 30.0
-    phi = np.linspace(0.0, 2 * math.pi, 48, endpoint=False)
-    r = 0.030 + 0.006 * np.cos(phi) + 0.002 * np.sin(3 * phi)
-    pts = tuple(zip(r * np.cos(phi), r * np.sin(phi), strict=True))
-    mech = cd.Mechanism(
-        "spline cam", ground={"O": (0.0, 0.0)},
-        bodies=[cd.Body("cam", 1.0, 1e-3, points={"O": (0, 0)}),
-                cd.Body("follower", M_F, 1e-4, points={"tip": (0.0, 0.0)},
-                        guess=(0.0, 0.04, 0.0))],
-        joints=[cd.Joint("A", "revolute", "ground.O", "cam.O"),
-                cd.Joint("F", "prismatic", "ground.O", "follower.tip", axis=(0.0, 1.0)),
-                cd.Joint("K", "contact", "cam.O", "follower.tip", unilateral=True,
-                         curve=cd.Curve("spline", points=pts))],
-        drivers=[cd.Driver("A", speed=w)],
-        initial=cd.Initial(joints={"K": 0.0}, velocities={"K": 0.0}))
+    mech = spline_cam(w, M_F)
     S = CubicSpline(*mech.joints["K"].curve.polar(), bc_type="periodic")
     turn = 2 * math.pi
 

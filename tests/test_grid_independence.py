@@ -25,6 +25,8 @@ from scipy.optimize import minimize_scalar
 
 import cmm_dae as cd
 
+from refs import spline_cam
+
 MODELS = Path(__file__).parent / "models"
 G = 9.81
 
@@ -88,21 +90,7 @@ def test_a_follower_that_falls_through_a_cam_within_one_step_lands():
     58 events on the 1e-3 grid (whose lift-offs and landings test_contact checks against
     the profile to 1e-8 s) and on IDA's own steps, both paths, the same to the last bit
     on one path."""
-    w = 30.0
-    phi = np.linspace(0.0, 2 * math.pi, 48, endpoint=False)
-    r = 0.030 + 0.006 * np.cos(phi) + 0.002 * np.sin(3 * phi)
-    pts = tuple(zip(r * np.cos(phi), r * np.sin(phi), strict=True))
-    mech = cd.Mechanism(
-        "spline cam", ground={"O": (0.0, 0.0)},
-        bodies=[cd.Body("cam", 1.0, 1e-3, points={"O": (0, 0)}),
-                cd.Body("follower", 0.2, 1e-4, points={"tip": (0.0, 0.0)},
-                        guess=(0.0, 0.04, 0.0))],
-        joints=[cd.Joint("A", "revolute", "ground.O", "cam.O"),
-                cd.Joint("F", "prismatic", "ground.O", "follower.tip", axis=(0.0, 1.0)),
-                cd.Joint("K", "contact", "cam.O", "follower.tip", unilateral=True,
-                         curve=cd.Curve("spline", points=pts))],
-        drivers=[cd.Driver("A", speed=w)],
-        initial=cd.Initial(joints={"K": 0.0}, velocities={"K": 0.0}))
+    mech = spline_cam()
     for c in (True, False):
         grid, own = (cd.simulate(mech, 2.0, rtol=1e-10, output_dt=dt, compiled=c)
                      for dt in (1e-3, None))

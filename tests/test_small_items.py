@@ -12,20 +12,9 @@ import pytest
 
 import cmm_dae as cd
 
+from refs import gear_pair
+
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def gear_pair(ratio: float = -0.5) -> cd.Mechanism:
-    return cd.Mechanism(
-        "gears", ground={"A": (0.0, 0.0), "B": (0.09, 0.0)},
-        bodies=[cd.Body("ga", 0.2, 1e-4, points={"O": (0, 0)}),
-                cd.Body("gb", 0.8, 2e-3, points={"O": (0, 0)})],
-        joints=[cd.Joint("A", "revolute", "ground.A", "ga.O"),
-                cd.Joint("B", "revolute", "ground.B", "gb.O")],
-        gears=[cd.Gear("Z", "A", "B", ratio=ratio)],
-        initial=cd.Initial(joints={"A": 0.0}),
-        loads=[cd.Load("motor", cd.Law(value=2.0), joint="A"),
-               cd.Load("brake", cd.Law(value=-1.0), joint="B")])
 
 
 @pytest.mark.parametrize("path", ["gears.Z.ratio", "joints.Z.ratio"])
