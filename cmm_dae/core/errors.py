@@ -27,6 +27,7 @@ class Status(StrEnum):
     SUCCESS = "success"
     DEAD_POINT = "dead point"
     LOCK_UP = "lock-up"
+    JAM = "friction jam"
     STALLED = "stalled"
     MAX_EVENTS = "max_events"
     INTERRUPTED = "interrupted"
@@ -41,6 +42,8 @@ STATUS_MESSAGES: dict[Status, str] = {
                        "constraints become dependent",
     Status.LOCK_UP: "a new lock leaves the drivers no freedom: a stop would have to stop a "
                     "driver",
+    Status.JAM: "a joint comes to rest where neither sticking nor slipping is consistent: "
+                "friction from the reactions would lock the mechanism against its own loads",
     Status.STALLED: "the run-wide step budget (max_steps) was spent: tiny steps at a grazing "
                     "contact, a near-singular position or forces too stiff for the tolerances",
     Status.MAX_EVENTS: "more events than max_events",

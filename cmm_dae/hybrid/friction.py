@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.errors import SolverError, Status
 from ..core.records import Event, EventKind, Side
 from ..equations.kkt import impact_map
 from .state import (
@@ -78,7 +79,14 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     v0, imp = v, np.zeros(model.m)
     if cd[k] != 0.0:
         v0, imp = impact_map(model, q, v, t, p, model.n_fixed + model.locks.index(joint), 0.0)
-    _, lam, _ = model.kkt(q, v0, t, p)
+    try:
+        _, lam, _ = model.kkt(q, v0, t, p)
+    except np.linalg.LinAlgError as e:  # no consistent forces with the joint at rest
+        raise SolverError(
+            f"friction jam at t = {t:.9g} s: joint '{joint}' comes to rest and neither "
+            "sticking nor slipping is consistent: the friction from the reactions would lock "
+            f"the mechanism against its own loads ({e}); less friction or another load "
+            "frees it", status=Status.JAM) from e
     force = hs.push(lam, joint, trial)
     hs.slip = slip
     if abs(force) <= hs.static(joint, lam):

@@ -249,8 +249,17 @@ class IterativeIntegrator(Integrator):
             # functions (friction), the next step and post-processing (it was solved twice
             # a step, a third of a fixed-step run of a pin with reaction friction)
             sol = _solved(model, q, v, t, p) if a_new is None else None
-            crossed = ev.crossings(hs, q, v, t, values, self.triggers,
-                                   lam=None if sol is None else sol[1])
+            try:
+                crossed = ev.crossings(hs, q, v, t, values, self.triggers,
+                                       lam=None if sol is None else sol[1])
+            except np.linalg.LinAlgError:
+                # the forces cannot be solved with the slip directions in force (friction
+                # from the reaction would lock a joint against its own load): a slipping
+                # joint reversed within the step, which its rate event tells without them
+                crossed = ev.crossings(hs, q, v, t, None,
+                                       [tr for tr in self.triggers if tr.kind == "rate"])
+                if not crossed:
+                    raise
             if crossed:
                 rec.add(t, q, v, cfg)  # the sample before the switch
                 return SegmentEnd(t, q, v, tuple(crossed), "event")
