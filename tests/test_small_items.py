@@ -166,3 +166,27 @@ def test_a_friction_jam_is_named(method, options):
     assert res.status is cd.Status.JAM
     assert "friction jam at t =" in res.message and "joint 'C'" in res.message
     assert res.t[-1] > 0.05
+
+
+@pytest.mark.parametrize("method", ["ida", "iterative"])
+def test_a_contact_started_on_its_curve_that_leaves_at_once_says_so(method):
+    """A block started on a line (K = 0) with side = "right" (below it) while gravity pulls
+    it down falls away at once: a lift-off at t = 0 whose note asks about the side (it
+    flew off with no event at all); with side = "left" it rests on the line (a lock)."""
+    def block(side: str) -> cd.Mechanism:
+        return cd.from_dict({
+            "mechanism": {"name": "block", "gravity": [0.0, -9.81]},
+            "ground": {"points": {"O": [0.0, 0.0]}},
+            "bodies": {"b": {"mass": 1.0, "inertia": 1e-3, "points": {"P": [0.0, 0.0]}}},
+            "joints": {"X": {"type": "prismatic", "connects": ["ground.O", "b.P"],
+                             "axis": [0.0, 1.0]},
+                       "K": {"type": "contact", "connects": ["ground.O", "b.P"],
+                             "curve": {"kind": "line", "direction": [1.0, 0.0]},
+                             "unilateral": True, "side": side}},
+            "initial": {"joints": {"K": 0.0}, "velocities": {"K": 0.0}}})
+    wrong = cd.simulate(block("right"), 0.2, method=method)
+    assert [(e.kind, e.t) for e in wrong.events] == [("lift-off", 0.0)]
+    assert "is `side` the side it keeps to?" in wrong.events[0].note
+    right = cd.simulate(block("left"), 0.2, method=method)
+    assert [(e.kind, e.t) for e in right.events] == [("lock", 0.0)]
+    assert np.max(np.abs(right.joint("X").position)) == 0.0

@@ -237,6 +237,11 @@ def start_state(model: Model, hs: HybridState, t0: float = 0.0
             hs.locked = trial
             events.append(Event(t=t0, kind=EventKind.LOCK, joint=name, side=side, before=before,
                                 after=hs.current()))
+        elif mech.joints[name].lands:  # said, not silent: a wrong `side` looks just so
+            events.append(Event(t=t0, kind=EventKind.LIFT_OFF, joint=name, side=side,
+                                before=hs.current(), after=hs.current(),
+                                note="starts on its curve and leaves it at once (the contact "
+                                     "would have to pull: is `side` the side it keeps to?)"))
     for name in model.frictional:  # dry friction: moving joints slip, resting ones stick
         if name in hs.locked or idle_slide(model, name, hs.locked):
             continue
