@@ -97,8 +97,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         A rebound slower than this (rad/s or m/s) locks the joint.
     max_steps : int or None
         Most steps in the whole run (default: 50,000 per simulated second, at least
-        500,000): beyond it IDA stops with a "stalled" :class:`SolverError` and its partial
-        Result instead of crawling on; a fixed step that would need more is refused.
+        500,000, both times (1e-8 / rtol) ** 0.25 below rtol 1e-8): beyond it IDA stops
+        with a "stalled" :class:`SolverError` and its partial Result instead of crawling
+        on; a fixed step that would need more is refused.
     throw : bool
         Raise :class:`SolverError` on failure (True) or return the partial Result with
         ``status`` and ``message`` saying what happened (False).
@@ -307,9 +308,8 @@ def _finish(model: Model, hs, rec: Recorder, events: list, after: list[int], sta
                        status, message, after, rec.works(), rec.kkt(model.nq, model.m),
                        rec.peaks())
     res.meta["equilibrium"] = eq_values  # the solved [initial] equilibrium, if any
-    # the tolerances IDA ran with (atol defaults to 1e-2 of rtol)
     res.meta["tolerances"] = ({"rtol": opts.rtol, "atol": opts.atol} if integ.method == "ida"
-                              else None)
+                              else None)  # (atol defaults to 1e-2 of rtol)
     # IDA's linear solver; whether its segments ran in C (else the Python path's fallback)
     res.meta["linsolver"] = getattr(integ, "linear_solver", None)
     res.meta["compiled"] = getattr(integ, "c", None) is not None
