@@ -103,6 +103,7 @@ def driver(build: bool = True) -> ctypes.CDLL:
         lib.cmm_seg_free.restype, lib.cmm_seg_free.argtypes = None, [_P]
         lib.cmm_seg_extremes.restype, lib.cmm_seg_extremes.argtypes = None, [_P, _D, _D, _D]
         lib.cmm_seg_crawl.restype, lib.cmm_seg_crawl.argtypes = None, [_P, x, n, c_long, x]
+        lib.cmm_seg_first.restype, lib.cmm_seg_first.argtypes = None, [_P, x]
         _driver = lib
     return _driver
 
@@ -232,14 +233,17 @@ class CompiledModel:
             max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
             band: bool = False, suppress: bool = True,
-            watch: np.ndarray | None = None, crawl: tuple | None = None) -> SegmentRun:
+            watch: np.ndarray | None = None, crawl: tuple | None = None,
+            first_tout: float = 0.0) -> SegmentRun:
         """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
         Jacobian is factored as a band where reordering makes it one (:attr:`band`);
         ``suppress``: the multipliers out of the error test (:mod:`.suppress`);
         ``watch``: entries of y whose extremes over IDA's steps are returned; ``crawl``:
-        (crawl step s, steps in place, slow steps, natural step s) of the crawl test."""
+        (crawl step s, steps in place, slow steps, natural step s) of the crawl test;
+        ``first_tout``: the tout of IDA's first call, s (its first step is a thousandth of
+        the way there; 0: the segment's end)."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
@@ -259,6 +263,7 @@ class CompiledModel:
             watch_.ctypes.data_as(_I), watch_.size)
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
+        lib.cmm_seg_first(seg, D(first_tout))
         if crawl is not None:
             lib.cmm_seg_crawl(seg, D(crawl[0]), int(crawl[1]), int(crawl[2]), D(crawl[3]))
         # IDA's coordinates, rates and works are recorded (the differential unknowns)

@@ -17,6 +17,7 @@ from .ida_steps import (
     SLOW_STEPS,
     _CrawlError,
     _StalledError,
+    first_tout,
 )
 from .tolerances import natural_step
 
@@ -159,7 +160,8 @@ class IdaCallbacks:
                        fns, len(self.triggers), self.opts.progress,
                        band=self.linear_solver == "band", suppress=self.suppress,
                        watch=self.watch, crawl=(self.crawl_step, IN_PLACE_STEPS, SLOW_STEPS,
-                                                self.h_natural))
+                                                self.h_natural),
+                       first_tout=first_tout(float(tspan[0]), float(tspan[-1])))
         self.n_steps = r.steps
         self.stalled, self.interrupted, self.trapped = r.stalled, r.interrupted, r.trapped
         self.crawled = r.crawled

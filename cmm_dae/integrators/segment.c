@@ -135,11 +135,11 @@ typedef struct {
      * passed are read from IDA's interpolant (tmp) before the next step */
     const double *tout;
     int nout, next, onestep, pending, pflag;
-    double tend, tcur, tprev;
+    double tend, tcur, tprev, first_tout;
     N_Vector tmp;
     /* the watched unknowns' largest and smallest values at IDA's steps (wv[2i], wv[2i+1]),
      * their times and the recorded entries of y there (rows of ncol) */
-    int nwatch, have_d;
+    int nwatch, have_d, started;
     const int *watch;
     double *wv, *wt, *wy, *d0, *d1;
     long budget, trap_nst, trap_nef;
@@ -442,6 +442,11 @@ void cmm_seg_crawl(Seg *s, double crawl_step, int in_place_max, long slow_steps,
     s->h_natural = h_natural;
 }
 
+/* The tout of IDA's first call (see cmm_seg_run), 0: the segment's end */
+void cmm_seg_first(Seg *s, double tout) {
+    s->first_tout = tout;
+}
+
 /* The watched unknowns' derivatives at t (within IDA's last step) into d */
 static int watch_rates(Seg *s, double t, double *d) {
     const double *x;
@@ -535,7 +540,13 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
                 break;
             }
         }
-        flag = IDASolve(s->mem, s->tend, &tt, s->yy, s->yp, IDA_ONE_STEP);
+        /* IDA's first step comes from the first tout it is given (a thousandth of the way
+         * there, before its own checks): first_tout (cmm_seg_first), not the segment's end
+         * (10 s ahead it began a restart at rtol 1e-12 with 1e-2 s and failed its error
+         * test ten times over) */
+        flag = IDASolve(s->mem, s->started || !(s->first_tout > 0.0) ? s->tend : s->first_tout,
+                        &tt, s->yy, s->yp, IDA_ONE_STEP);
+        s->started = 1;
         if (flag >= 0 && s->nwatch) {
             watch_step(s, s->tprev, tt, unperm(s, s->yy, s->ybuf));
             s->tprev = tt;

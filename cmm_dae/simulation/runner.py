@@ -96,10 +96,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     v_lock : float
         A rebound slower than this (rad/s or m/s) locks the joint.
     max_steps : int or None
-        Most steps in the whole run (default: 50,000 per simulated second, at least
-        500,000, both times (1e-8 / rtol) ** 0.25 below rtol 1e-8): beyond it IDA stops
-        with a "stalled" :class:`SolverError` and its partial Result instead of crawling
-        on; a fixed step that would need more is refused.
+        Most steps in the run (default 50,000 per simulated second, at least 500,000, both
+        times (1e-8 / rtol) ** 0.25 below rtol 1e-8): beyond it a "stalled"
+        :class:`SolverError` with the partial Result; a fixed step needing more is refused.
     throw : bool
         Raise :class:`SolverError` on failure (True) or return the partial Result with
         ``status`` and ``message`` saying what happened (False).
