@@ -190,3 +190,17 @@ def test_a_contact_started_on_its_curve_that_leaves_at_once_says_so(method):
     right = cd.simulate(block("left"), 0.2, method=method)
     assert [(e.kind, e.t) for e in right.events] == [("lock", 0.0)]
     assert np.max(np.abs(right.joint("X").position)) == 0.0
+
+
+def test_the_order_one_trap_loosens_the_velocities_at_most_1000x(monkeypatch):
+    """Where IDA is stuck at order 1 (suppress.TrapCheck, here made to say so after five
+    steps of every segment), the segment ends and goes on with the velocities' absolute
+    tolerance 10x looser, three times at most; the fourth time the run fails and says why,
+    the run so far kept."""
+    from cmm_dae.integrators import suppress
+
+    monkeypatch.setattr(suppress.TrapCheck, "__call__", lambda self, nst: nst >= 5)
+    with pytest.raises(cd.SolverError, match=r"stuck at order 1 .* atol raised 1000x") as info:
+        cd.simulate(cd.load(ROOT / "models" / "double_folded.toml"), 1.0, compiled=False)
+    assert info.value.status is cd.Status.INTEGRATOR
+    assert info.value.result.t[-1] > 0.0

@@ -186,12 +186,11 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         h1 = self._first_step(y0, yp0, t_stop - t0) \
             if failed and self.error is None and not first_step else 0.0
         if h1 > 0.0 and T[-1] - t0 < h1:
-            # IDA's own first step comes from y' and the tolerances alone: on Andrews'
-            # squeezer at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix
-            # (mass / h^2 beside the constraint rows) cannot be solved, and each failure
-            # only made it smaller; after A02's third crossing (40 loops, rtol 1e-11) its
-            # steps grew to 4e-8 s in all and then failed alike. A failure before one
-            # step from the accelerations is covered: again with that first step.
+            # IDA's own first step comes from y' and the tolerances alone: on Andrews' squeezer
+            # at rtol 1e-10 it was 2.4e-16 s, where the index-2 Newton matrix (mass / h^2 beside
+            # the constraint rows) cannot be solved, each failure making it smaller; after A02's
+            # third crossing (40 loops, rtol 1e-11) its steps grew to 4e-8 s and failed alike.
+            # A failure before one step from the accelerations is tried again with that step.
             self.first_step = h1
             return self.advance(t0, q, v, rec)
         if failed and self.error is None and T[-1] <= t0 and self.crossed_at == t0:
@@ -253,6 +252,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             raise SolverError(message, status=status)
         if r.status == 2 and self.trapped:  # (suppress.TrapCheck) on, velocities looser
             self.v_raise *= 10.0
+            if self.v_raise > 1e3:  # (at most 1000x looser: then said)
+                raise SolverError(f"IDA is stuck at order 1 at t = {t1:.9g} s with the velocities' "
+                                  "atol raised 1000x: try another rtol", status=Status.INTEGRATOR)
             return SegmentEnd(t1, q1, v1, (), "restart")
         if r.status == 2 and self.stalled:
             raise SolverError(
