@@ -26,6 +26,8 @@ from cmm_dae.description import iftomm
 cd.simulate(iftomm.a02_four_bar(int(sys.argv[1])), 2.0, rtol=float(sys.argv[2]))
 """
 
+# MuJoCo's process must not import cmm_dae (its import would be timed too): the start of
+# cmm_dae.studies.peers.a02_mujoco_prepared is written out here again
 MUJOCO = """
 import sys
 import numpy as np
