@@ -156,20 +156,6 @@ class Extremes:
     t: np.ndarray
     y: np.ndarray
 
-    @classmethod
-    def of_steps(cls, T: np.ndarray, Y: np.ndarray, watch: np.ndarray, ncol: int
-                 ) -> Extremes:
-        """The extremes among the steps (T, full rows Y) of the Python path."""
-        w = len(watch)
-        value, t, y = np.empty(2 * w), np.full(2 * w, np.nan), np.full((2 * w, ncol), np.nan)
-        value[0::2], value[1::2] = -np.inf, np.inf
-        if T.size:
-            X = Y[:, watch]
-            for j, pick in enumerate((np.argmax, np.argmin)):
-                k = pick(X, axis=0)
-                value[j::2], t[j::2], y[j::2] = X[k, np.arange(w)], T[k], Y[k, :ncol]
-        return cls(value, t, y)
-
 
 class CompiledModel:
     """A model's compiled residual and Jacobian and its configurations' event functions."""
