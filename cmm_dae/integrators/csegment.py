@@ -218,10 +218,10 @@ class CompiledModel:
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,
             max_steps: int, budget: int,
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
-            band: bool = False, suppress: bool = True,
+            band: bool = False, suppress: bool = True, onestep: bool = False,
             watch: np.ndarray | None = None, crawl: tuple | None = None,
             first_tout: float = 0.0) -> SegmentRun:
-        """One segment from ``tspan[0]``: IDA's steps when ``tspan`` has two entries,
+        """One segment from ``tspan[0]`` to ``tspan[-1]``: IDA's steps with ``onestep``,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
         Jacobian is factored as a band where reordering makes it one (:attr:`band`);
@@ -243,7 +243,7 @@ class CompiledModel:
             ev_f, ev_w, evx_f, evx_w, p_.ctypes.data_as(_D), D(tspan[0]),
             y0_.ctypes.data_as(_D), yp0_.ctypes.data_as(_D), atol_.ctypes.data_as(_D),
             D(rtol), D(first_step), D(min_step), max_steps, budget, int(relaxed), int(suppress),
-            tout_.ctypes.data_as(_D), tout_.size, int(tspan.size == 2), self.rowind.size,
+            tout_.ctypes.data_as(_D), tout_.size, int(onestep), self.rowind.size,
             self.colptr.ctypes.data_as(_I), self.rowind.ctypes.data_as(_I), int(self.sparse),
             *((order[0].ctypes.data_as(_I), order[1], order[2]) if order else (None, 0, 0)),
             watch_.ctypes.data_as(_I), watch_.size)
@@ -261,7 +261,7 @@ class CompiledModel:
         interrupted = False
         try:
             while True:
-                cap = CHUNK if tspan.size == 2 else min(CHUNK, tout_.size)
+                cap = CHUNK if onestep else min(CHUNK, tout_.size + 1)
                 T, Y = np.empty(cap), np.empty((cap, ncol))
                 try:
                     flag = lib.cmm_seg_run(seg, T.ctypes.data_as(_D), Y.ctypes.data_as(_D),

@@ -178,8 +178,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         opts, hs, u = self.opts, self.hs, self.u
         first_step, q, v, y0, yp0, t_stop = self._begin(t0, q, v)
         solver = self._solver(first_step)
-        tspan, extra = segment_times(self.opts, t0, t_stop)
-        self.outputs = set(tspan.tolist())  # IDA checks roots at output times too: no steps
+        tspan = segment_times(self.opts, t0, t_stop)
+        self.outputs = set(tspan.tolist())  # (IDA's landing on the stop time: not a step)
         r = self._solve(solver, tspan, y0, yp0, first_step, t0)
         T, Y = np.asarray(r.t), np.asarray(r.y)
         failed = r.status < 0 or self.crawled  # steps in place are a failure there
@@ -208,8 +208,6 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             return self.advance(t0, q, v, rec)
         keep = np.arange(1, T.size)
         keep = keep[T[keep] > t0]  # (a failure without a step returns t0 once more)
-        if extra is not None:
-            keep = keep[(T[keep] != extra) | (keep == T.size - 1)]
         if self.error is not None:  # only what was computed before the failure
             keep = keep[T[keep] <= self.t_error]
         # IDA's own steps (no output grid) end, at a failure, with its last time repeated

@@ -159,6 +159,7 @@ class IdaCallbacks:
                        self.min_step, self.opts.max_steps, self.step_budget, self.relaxed,
                        fns, len(self.triggers), self.opts.progress,
                        band=self.linear_solver == "band", suppress=self.suppress,
+                       onestep=self.opts.output_dt is None,
                        watch=self.watch, crawl=(self.crawl_step, IN_PLACE_STEPS, SLOW_STEPS,
                                                 self.h_natural),
                        first_tout=first_tout(float(tspan[0]), float(tspan[-1])))

@@ -170,21 +170,13 @@ def _restore_fd1(saved: int | None, out: _SundialsOut) -> None:
         out.flush()
 
 
-def segment_times(opts: RunOptions, t0: float, t_stop: float
-                  ) -> tuple[np.ndarray, float | None]:
-    """The output times of a segment from t0 to ``t_stop`` (a break, or the end), and
-    ``extra``: a midpoint to drop again, or None."""
+def segment_times(opts: RunOptions, t0: float, t_stop: float) -> np.ndarray:
+    """t0 and the output times of a segment from t0 to ``t_stop`` (a break, or the end),
+    ``t_stop`` last."""
     outs = _output_times(opts, t0)
     if t_stop < opts.t_end:
         outs = np.append(outs[outs < t_stop - 1e-12 * max(1.0, t_stop)], t_stop)
-    tspan = np.concatenate([[t0], outs])
-    extra = None
-    # scikit-sundae returns IDA's internal steps for a 2-point tspan: that is what
-    # output_dt=None asks for; on a grid, a midpoint (dropped again) avoids it
-    if tspan.size == 2 and opts.output_dt is not None:
-        extra = 0.5 * (tspan[0] + tspan[1])
-        tspan = np.array([tspan[0], extra, tspan[1]])
-    return tspan, extra
+    return np.concatenate([[t0], outs])
 
 
 #: IDA's first step is a thousandth of the way to the first tout it is given: the first
