@@ -80,14 +80,11 @@ def _check_run_options(mech: Mechanism, t_end: float, run_options: dict[str, Any
         names = ", ".join(k for k in list(sig.parameters)[2:] if k[0] != "_")
         raise ModelError(Problem("run", unknown[0], "not an option of a run; expected one "
                                  f"of {names}"))
-    given = {k: p.default for k, p in sig.parameters.items()
-             if k in _OPTION_NAMES}
-    given.update((k, v) for k, v in run_options.items() if k in _OPTION_NAMES)
+    # the options check_options takes (by keyword), at simulate's defaults unless given
+    checked = [k for k, p in inspect.signature(check_options).parameters.items()
+               if p.kind is p.KEYWORD_ONLY and k != "model"]
+    given = {k: run_options.get(k, sig.parameters[k].default) for k in checked}
     check_options(mech, run_options.get("method", "ida"), t_end, **given)
-
-
-_OPTION_NAMES = ("rtol", "atol", "output_dt", "dt", "output_every", "max_events", "v_lock",
-                 "max_steps", "linsolver", "compiled")
 
 
 def run_case(mech: Mechanism, values: dict[str, float], t_end: float,
