@@ -24,17 +24,22 @@ class Buffered:
     """A CasADi function evaluated through its buffer API (about 3 us instead of 30 us a
     call from Python): the one way the package evaluates its compiled functions.
 
+    ``fixed``: the values of the last input, bound once (a lifted function's constants).
     Two uses: ``f(*args)`` copies the arguments in and returns fresh numpy arrays (vectors
     1-D, matrices 2-D); for hot callbacks, :meth:`bind` and :meth:`bind_out` point the
     function at caller-owned arrays once and :meth:`run` evaluates it without any copy.
     """
 
-    def __init__(self, fn: ca.Function, sparse: bool = False):
+    def __init__(self, fn: ca.Function, sparse: bool = False, fixed: np.ndarray | None = None):
         self.fn = fn
         self.buf, self._call = fn.buffer()
         self.args = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
+        if fixed is not None:  # the last input, bound for good (a lifted function's
+            # constants, :mod:`.lifting`): calls give the others
+            self.args[-1] = np.ascontiguousarray(fixed, dtype=float).copy()
         for i, a in enumerate(self.args):
             self.buf.set_arg(i, memoryview(a))
+        self._free = len(self.args) - (fixed is not None)
         self.outs = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
         for i, o in enumerate(self.outs):
             self.buf.set_res(i, memoryview(o))
@@ -59,7 +64,7 @@ class Buffered:
         self._call()
 
     def __call__(self, *args) -> list[np.ndarray]:
-        for a, x in zip(self.args, args, strict=True):
+        for a, x in zip(self.args[:self._free], args, strict=True):
             if np.ndim(x) > 1:
                 a[:] = np.ravel(x, order="F")  # CasADi is column-major
             else:

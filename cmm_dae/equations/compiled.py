@@ -25,6 +25,7 @@ import numpy as np
 from ..core.memo import once
 from . import banded, kinematics, kkt, outputs
 from .codegen import Buffered, NotBuiltError, build_library, function_key
+from .lifting import external, lift, wrap
 from .model import Model
 
 __all__ = ["BANDED", "DENSE", "MAPPED", "OUTPUTS_BUDGET", "SINGLE", "instructions",
@@ -101,17 +102,20 @@ def use_compiled(model: Model, build: bool = True) -> bool:
     if instructions(model) > OUTPUTS_BUDGET:
         return False
     funcs, singles = _functions(model), _singles(model)
-    every = [*funcs.values(), *singles.values()]
+    # their numbers as inputs (:mod:`.lifting`): one library per mechanism structure
+    lifted = once(model, ("outputs lifted",), lambda: {
+        attr: lift(f) for attr, f in [*funcs.items(), *singles.items()]})
+    every = [x.fn for x in lifted.values()]
     try:
         lib = build_library(function_key(every), None, every, build=build)
     except NotBuiltError:
         return False
     except (OSError, subprocess.SubprocessError, RuntimeError):
         return False  # the model's own functions give the same numbers
-    for attr, f in funcs.items():
-        setattr(model, attr, ca.external(f.name(), str(lib)))
-    for attr, f in singles.items():
-        setattr(model, attr, Buffered(ca.external(f.name(), str(lib))))
+    for attr, x in lifted.items():
+        ext = external(x.fn.name(), str(lib))
+        setattr(model, attr, Buffered(ext, fixed=x.values) if attr in singles
+                else wrap(ext, x.values))
     # the maps built on the virtual machine's functions go (they are built anew on use)
     model.forget_maps(MAPPED)
     model.outputs_compiled = True

@@ -30,11 +30,12 @@ from sksundae._cy_ida import IDAMESSAGES
 from ..core.progress import Bar
 from ..equations import banded, compiled, kkt
 from ..equations.codegen import build_library, function_key
+from ..equations.lifting import lift
 from ..equations.model import Model
 from ..hybrid import policy as ev
 
-__all__ = ["CHUNK", "CompiledModel", "Extremes", "SegmentRun", "available", "check_version",
-           "driver"]
+__all__ = ["CHUNK", "CompiledModel", "Events", "Extremes", "SegmentRun", "available",
+           "check_version", "driver"]
 
 #: cmm_seg_run's own return values besides IDA's flags
 SEG_MORE, SEG_STALLED, SEG_TRAPPED, SEG_CRAWLED = 100, 101, 102, 103
@@ -147,6 +148,17 @@ class SegmentRun:
     extremes: Extremes | None = None
 
 
+@dataclass(frozen=True)
+class Events:
+    """A configuration's compiled event functions: their library, the lean function's
+    and the exact one's addresses (function, work-size query; None where absent) and the
+    constants p's tail carries for the segment (the residual's and Jacobian's first)."""
+    lib: ctypes.CDLL
+    ev: tuple[int, int]
+    evx: tuple[int | None, int | None]
+    values: np.ndarray
+
+
 @dataclass
 class Extremes:
     """The largest and smallest value of each watched unknown of y over a segment's IDA
@@ -171,7 +183,14 @@ class CompiledModel:
         self.rowind = np.asarray(row, dtype=np.intc)
         #: IDA's unknowns reordered into a band, where :meth:`run` is asked for one
         self.band = banded.ida_order(self.colptr, self.rowind, model.ida.N) if sparse else None
-        funcs = [res, jac]
+        # the residual and Jacobian read the mechanism's numbers from p's tail
+        # (:mod:`~cmm_dae.equations.lifting`): one library per structure, not per value
+        n_p = model.n_params
+        lres = lift(res, 3)
+        ljac = lift(jac, 4, n_p + lres.values.size)
+        #: the constants p's tail carries for the residual and the Jacobian
+        self.values = np.concatenate([lres.values, ljac.values])
+        funcs = [lres.fn, ljac.fn]
         # post-processing and the screen in C too, where built (or now, with build): its
         # library compiled beside the segment's, two compilers at once (A02 with 32
         # loops: the two took 5.0 and 8.7 s one after the other)
@@ -185,34 +204,53 @@ class CompiledModel:
             post.join()
         self.res = _pointers(self.fns, res.name())
         self.jac = _pointers(self.fns, jac.name())
-        self._events: dict[tuple, tuple[ctypes.CDLL, tuple[int, int], tuple[int, int]]] = {}
+        self._events: dict[tuple, Events] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
-                        triggers: list[ev.Trigger], exact: bool
-                        ) -> tuple[ctypes.CDLL, tuple[int, int], tuple[int | None, int | None]]:
+                        triggers: list[ev.Trigger], exact: bool) -> Events:
         """The compiled event functions of one configuration: the lean one of y (IDA's
         multipliers; ``lean`` as the Python path uses it) and, when lock forces are
-        watched, the exact one of (t, y, p) with the multipliers of a KKT solve."""
+        watched, the exact one of (t, y, p) with the multipliers of a KKT solve; their
+        constants are read from p's tail after the residual's and the Jacobian's."""
         got = self._events.get(key)
         if got is None:
-            funcs = [ca.Function("cmm_ev", lean.sx_in(), lean.call(lean.sx_in()))]
+            at = self.model.n_params + self.values.size
+            lean_l = lift(lean, None, at)  # its p: an input of its own, constants only
+            funcs, values = [ca.Function("cmm_ev", lean_l.fn.sx_in(),
+                                         lean_l.fn.call(lean_l.fn.sx_in()))], [lean_l.values]
             if exact:
-                funcs.append(self._exact(hs, triggers))
+                fn, vals = self._exact(hs, triggers, at + lean_l.values.size)
+                funcs.append(fn)
+                values += vals
             lib = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs)))
-            got = (lib, _pointers(lib, "cmm_ev"),
-                   _pointers(lib, "cmm_evx") if exact else (None, None))
+            got = Events(lib, _pointers(lib, "cmm_ev"),
+                         _pointers(lib, "cmm_evx") if exact else (None, None),
+                         np.concatenate([self.values, *values]))
             self._events[key] = got
         return got
 
-    def _exact(self, hs: ev.HybridState, triggers: list[ev.Trigger]) -> ca.Function:
+    def _exact(self, hs: ev.HybridState, triggers: list[ev.Trigger], at: int
+               ) -> tuple[ca.Function, list[np.ndarray]]:
+        """The exact event values of (t, y, p): the KKT system and the event values built
+        as SX functions and lifted (their constants from ``p[at:]``), the solve between
+        them in MX (a QR, which has no SX form); the constants."""
         model = self.model
-        t, y, p = ca.MX.sym("t"), ca.MX.sym("y", model.ida.N), ca.MX.sym("p", model.n_params)
+        t, y, p = ca.SX.sym("t"), ca.SX.sym("y", model.ida.N), ca.SX.sym("p", model.n_params)
         q, v, _ = model.ida.symbolic(y)
-        _, lam = kkt.symbolic(model, q, v, t, p).solve()
+        system = kkt.symbolic(model, q, v, t, p)
+        lam = ca.SX.sym("lam", model.m)
         c, cd = model.cvel_fn(q, v)
         vals: list = [None] * len(triggers)
         ev.event_values(hs, c, cd, lam, triggers, vals, where=ca.if_else)
-        return ca.Function("cmm_evx", [t, y, p], [ca.vertcat(1.0, *vals)])
+        sys_l = lift(ca.Function("cmm_kkt", [t, y, p], [system.A, system.b]), 2, at)
+        ev_l = lift(ca.Function("cmm_evl", [y, lam, p], [ca.vertcat(*vals)]), 2,
+                    at + sys_l.values.size)
+        tm, ym = ca.MX.sym("t"), ca.MX.sym("y", model.ida.N)
+        pm = ca.MX.sym("p", at + sys_l.values.size + ev_l.values.size)
+        A, b = sys_l.fn(tm, ym, pm[:sys_l.fn.nnz_in(2)])  # (the front: its constants')
+        lam_m = system.unpack(kkt.solve_symbolic(A, b))[1]
+        return (ca.Function("cmm_evx", [tm, ym, pm], [ca.vertcat(1.0, ev_l.fn(ym, lam_m, pm))]),
+                [sys_l.values, ev_l.values])
 
     def run(self, p: np.ndarray, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,
@@ -232,11 +270,13 @@ class CompiledModel:
         the way there; 0: the segment's end)."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
-        (ev_f, ev_w), (evx_f, evx_w) = events[1], events[2]
+        (ev_f, ev_w), (evx_f, evx_w) = events.ev, events.evx
         D = ctypes.c_double
         # contiguous copies, locals of this call: alive while the C side points at them
-        p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float)
-                                       for a in (p, y0, yp0, atol, tspan[1:]))
+        # p, then the constants of the compiled functions (CompiledModel.values, the
+        # configuration's event functions')
+        p_, y0_, yp0_, atol_, tout_ = (np.ascontiguousarray(a, dtype=float) for a in (
+            np.concatenate([p, events.values]), y0, yp0, atol, tspan[1:]))
         watch_ = np.ascontiguousarray(np.zeros(0) if watch is None else watch, dtype=np.intc)
         seg = lib.cmm_seg_new(
             N, ne, model.ida.lam.start, self.res[0], self.res[1], self.jac[0], self.jac[1],

@@ -112,7 +112,8 @@ typedef struct {
     int N, ne, ncol;            /* ncol: the leading entries of y recorded (q, v) */
     Fn res, jac, ev, evx;      /* evx: exact event values (KKT lock forces), may be absent */
     int has_evx, relaxed;
-    double *p;                 /* the configuration's parameters (owned by the caller) */
+    double *p;                 /* the configuration's parameters, then the constants of
+                                * the compiled functions (owned by the caller) */
     int nnz, sparse;           /* the Jacobian's CSC pattern; sparse: SuperLU_MT, else */
     const int *colptr, *rowind; /* the nonzeros are scattered into a dense matrix */
     double *jbuf;
@@ -237,6 +238,7 @@ static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *
     const double *yy = unperm(s, y, s->ybuf);
     (void)yp;
     s->ev.arg[0] = yy;
+    s->ev.arg[1] = s->p;  /* (its constants: p's tail) */
     s->ev.res[0] = g;
     s->ev.res[1] = &s->near;
     if (s->ev.f(s->ev.arg, s->ev.res, s->ev.iw, s->ev.w, 0)) return -1;
