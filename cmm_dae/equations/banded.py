@@ -214,6 +214,17 @@ def kkt_nz_function(model: Any) -> ca.Function:
     return model.kkt_nz_fn
 
 
+def constraints_nz_function(model: Any) -> ca.Function:
+    """``con_nz(q, t, p)`` -> (phi, Phi_q's nonzeros, Phi_t): the constraints of one state
+    without the dense Phi_q (a long chain's projections; built once, as
+    ``model.con_nz_fn``)."""
+    if getattr(model, "con_nz_fn", None) is None:
+        args = model.phi_fn.sx_in()
+        phi, _, Phi_t = model.phi_fn(*args)
+        model.con_nz_fn = ca.Function("con_nz", args, [phi, model.phi_q_nz_fn(*args), Phi_t])
+    return model.con_nz_fn
+
+
 @functools.lru_cache(maxsize=16)
 def _scatter_cached(index: bytes, size: int) -> sp.csr_matrix:
     where = np.frombuffer(index, dtype=np.int64)

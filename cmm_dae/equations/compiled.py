@@ -34,13 +34,14 @@ __all__ = ["BANDED", "DENSE", "MAPPED", "OUTPUTS_BUDGET", "SINGLE", "instruction
 #: The model's attributes so replaced, and the names of their CasADi functions.
 MAPPED = {"outputs_fn": "outputs", "series_fn": "series", "gram_fn": "gram",
           "schur_fn": "schur", "acc_fn": "acc", "post_kkt_fn": "post_kkt",
-          "kkt_nz_fn": "kkt_nz", "phi_q_nz_fn": "phi_q_nz", "free_fn": "free_rows"}
+          "kkt_nz_fn": "kkt_nz", "phi_q_nz_fn": "phi_q_nz", "free_fn": "free_rows",
+          "con_nz_fn": "con_nz"}
 #: Those compiled for a mechanism that is not banded (where it has them).
 DENSE = ("outputs_fn", "series_fn", "gram_fn", "schur_fn", "acc_fn", "post_kkt_fn")
 #: Those compiled for a banded one (:func:`~.banded.for_model`), whose post-processing and
 #: screen work from Phi_q's nonzeros (A02 with 32 loops: 11,400 instructions; its dense
 #: Schur complement, Gram matrix and single-state evaluators would be 250,000).
-BANDED = ("outputs_fn", "series_fn", "kkt_nz_fn", "phi_q_nz_fn", "free_fn")
+BANDED = ("outputs_fn", "series_fn", "kkt_nz_fn", "phi_q_nz_fn", "free_fn", "con_nz_fn")
 #: The model's single-state evaluators (:class:`~.codegen.Buffered`) so replaced (not on
 #: a banded mechanism).
 SINGLE = ("_phi", "_coord", "_cvel", "_post", "_kin", "_rates_jac", "_kkt_parts", "_free",
@@ -53,6 +54,7 @@ def _functions(model: Model) -> dict[str, ca.Function]:
     outputs.series_function(model)
     if banded.for_model(model) is not None:
         banded.kkt_nz_function(model)
+        banded.constraints_nz_function(model)
         return {attr: getattr(model, attr) for attr in BANDED}
     kinematics.gram_function(model)
     if model.m and np.all(model.mass > 0.0):  # (the Schur complement needs every mass)

@@ -8,110 +8,13 @@ import weakref
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spl
-from scipy.linalg import qr, solve_triangular
+from scipy.linalg import qr
 from scipy.linalg.lapack import dpbtrf
 
 from . import banded, bandsvd, rank
-from .build import Constraints
+from .minnorm import QR_ROWS, SPARSE_FILL, SPARSE_ROWS, MinNorm, SparseRows  # noqa: F401
 from .model import Model
 from .unknowns import ground_pins
-
-# ------------------------------------------------------------------- geometry
-#: Rows from which :class:`MinNorm` factors by QR: measured side by side, ``lstsq`` took
-#: 0.64x the time of QR and the triangular solve on 11 x 12 rows (the double-folded
-#: mechanism's size), 1.25x on 30 x 33 and 1.8x on 120 x 123 (random full-rank matrices).
-QR_ROWS = 30
-#: Rows from which :class:`MinNorm` solves a sparse Jacobian (at most :data:`SPARSE_FILL`
-#: of its entries nonzero) through the augmented system ``[[I, J^T], [J, 0]]`` by sparse
-#: LU instead of a dense QR: on A02 with 32 loops (194 x 195 rows, 1.5 % nonzero) 0.8 ms
-#: against 1.6 ms, the same solution to 2e-14 (the projections of its singular crossings
-#: took 3.3 s of QR in a 7.7-s run). The augmented system's condition is J's, not its
-#: square, as the normal equations' would be.
-SPARSE_ROWS = 100
-SPARSE_FILL = 0.05
-
-
-class MinNorm:
-    """Minimum-norm solutions of ``J x = r`` for one constraint Jacobian ``J``.
-
-    For :data:`QR_ROWS` rows or more with full row rank, from the QR factors of ``J^T``
-    (``J = R^T Q^T``, so ``x = Q R^-T r``), factored once for several right-hand sides.
-    Below that, where it is (numerically) rank deficient, has more rows than columns (a
-    new lock can make the rows dependent until a jam is resolved) or ``rcond`` asks for a
-    cut-off, numpy's SVD-based ``lstsq``.
-    """
-
-    def __init__(self, J: np.ndarray, rcond: float | None = None,
-                 nonzeros: tuple[np.ndarray, np.ndarray] | None = None):
-        self.J, self.rcond = J, rcond
-        self.qr: tuple[np.ndarray, np.ndarray] | None = None
-        self.lu = None
-        m, n = J.shape
-        if rcond is None and SPARSE_ROWS <= m <= n:
-            self.lu = _augmented_lu(J, nonzeros)
-            if self.lu is not None:
-                return
-        if rcond is None and QR_ROWS <= m <= n:
-            Q, R = np.linalg.qr(J.T)
-            d = np.abs(np.diag(R))
-            # lstsq's own cut-off (eps max(m, n) of the largest singular value), with a
-            # margin: |R_ii| bound the singular values only roughly
-            if d.min() > 10.0 * np.finfo(float).eps * n * d.max():
-                self.qr = (Q, R)
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        """The minimum-norm x with ``J x = r`` (least squares where there is none)."""
-        if self.lu is not None:
-            n = self.J.shape[1]
-            x = self.lu.solve(np.concatenate([np.zeros(n), r]))[:n]
-            if np.all(np.isfinite(x)):
-                return x
-        if self.qr is None:
-            return np.linalg.lstsq(self.J, r, rcond=self.rcond)[0]
-        Q, R = self.qr
-        return Q @ solve_triangular(R, r, trans="T")
-
-
-def _augmented_lu(J: np.ndarray, nonzeros: tuple[np.ndarray, np.ndarray] | None = None):
-    """Sparse LU of ``[[I, J^T], [J, 0]]`` for a sparse ``J`` (None where it is dense or
-    the system exactly singular), its CSC arrays assembled directly: column j < n holds
-    the 1 at row j and J's column j below it, column n + i J's row i. ``nonzeros``: J's
-    (rows, columns) in row-major order where known (:func:`active_nonzeros`), else found."""
-    m, n = J.shape
-    # row-major: J's rows in order
-    ri, ci = nonzeros if nonzeros is not None else np.nonzero(J)
-    if ri.size > SPARSE_FILL * J.size:
-        return None
-    # J's columns in order (rj: their rows, ascending in each): np.nonzero(J.T)'s order,
-    # without a second scan of the dense J
-    order = np.argsort(ci, kind="stable")
-    cj, rj = ci[order], ri[order]
-    per_col = np.bincount(cj, minlength=n) + 1
-    per_row = np.bincount(ri, minlength=m)
-    indptr = np.concatenate([[0], np.cumsum(np.concatenate([per_col, per_row]))])
-    indices = np.empty(indptr[-1], dtype=np.int32)
-    data = np.empty(indptr[-1])
-    # the identity's 1 first in each of the first n columns, then J's column below it
-    starts = indptr[:n]
-    indices[starts] = np.arange(n)
-    data[starts] = 1.0
-    # J's column entries: after the diagonal, in the order np.nonzero gave them
-    order = np.arange(cj.size) - np.concatenate([[0], np.cumsum(per_col - 1)])[cj]
-    pos = starts[cj] + 1 + order
-    indices[pos] = n + rj
-    data[pos] = J[rj, cj]
-    # J's rows as the last m columns (entries at rows ci)
-    tail = indptr[n] + np.arange(ri.size)
-    indices[tail] = ci
-    data[tail] = J[ri, ci]
-    K = sp.csc_matrix((data, indices, indptr), shape=(n + m, n + m))
-    try:
-        return spl.splu(K)
-    except RuntimeError:  # exactly singular: dependent rows, least squares instead
-        return None
-
 
 _STRUCTURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -153,10 +56,26 @@ def active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
         _csc_index(model, act)]
 
 
+def active_constraints(model: Model, q: np.ndarray, t: float, p: np.ndarray,
+                       act: np.ndarray) -> tuple:
+    """The rows ``act`` of (phi, Phi_q, Phi_t) at (q, t): Phi_q's as :class:`SparseRows`
+    from its nonzeros alone where the rows are many (:func:`active_nonzeros`; A02 with 64
+    loops: the dense 386 x 387 Phi_q took 5.4 of a 14-s run's crossings), else dense."""
+    nz = active_nonzeros(model, act)
+    if nz is None:
+        con = model.constraints(q, t, p)
+        return con.phi[act], con.Phi_q[act], con.Phi_t[act]
+    banded.constraints_nz_function(model)  # (built once)
+    phi, vals, Phi_t = model.mapped("con_nz_fn", 1)(q, t, p)
+    return (phi[act], SparseRows(vals[_csc_index(model, act)], *nz, (act.size, model.nq)),
+            Phi_t[act])
+
+
 def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarray,
-            rcond: float | None) -> tuple[np.ndarray, Constraints | None]:
-    """Minimum-norm Newton iterations onto the rows ``act``: q, and the constraints
-    evaluated at that q (None when the iterations ran out after a last correction)."""
+            rcond: float | None) -> tuple[np.ndarray, tuple | None]:
+    """Minimum-norm Newton iterations onto the rows ``act``: q, and the constraints'
+    rows there (:func:`active_constraints`; None when the iterations ran out after a last
+    correction)."""
     # round-off in the constraint values grows with the coordinates' size (7e-15 m on
     # A02 with 40 loops, whose pivots reach x = 40 m): a fixed 1e-15 was never met there
     # and every projection ran all its iterations
@@ -164,15 +83,15 @@ def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarra
     r_prev = np.inf
     solver: MinNorm | None = None
     for _ in range(10):
-        con = model.constraints(q, t, p)
-        r = con.phi[act]
+        con = active_constraints(model, q, t, p, act)
+        r = con[0]
         r_max = float(np.max(np.abs(r), initial=0.0))
         if r_max < tol or (r_max < 10 * tol and not r_max < r_prev):
             return q, con  # met, or no longer falling at round-off level
         # the last factorization while it still converges fast (a simplified Newton
         # step); a new one where it did not shrink the residual tenfold
         if solver is None or not r_max < 0.1 * r_prev:
-            solver = MinNorm(con.Phi_q[act], rcond, active_nonzeros(model, act))
+            solver = MinNorm(con[1], rcond, active_nonzeros(model, act))
         r_prev = r_max
         q = q - solver.solve(r)
     return q, None
@@ -200,15 +119,15 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray,
 
 
 def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
-                       rcond: float | None = None, con: Constraints | None = None
-                       ) -> np.ndarray:
+                       rcond: float | None = None, con: tuple | None = None) -> np.ndarray:
     """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows; ``rcond``
-    as in :func:`project_state`; ``con``: the constraints at (q, t) where known)."""
+    as in :func:`project_state`; ``con``: their :func:`active_constraints` at (q, t)
+    where known)."""
     act = model.active_rows(p)
     if con is None:
-        con = model.constraints(q, t, p)
-    J = con.Phi_q[act]
-    return v - MinNorm(J, rcond, active_nonzeros(model, act)).solve(J @ v + con.Phi_t[act])
+        con = active_constraints(model, q, t, p, act)
+    J = con[1]
+    return v - MinNorm(J, rcond, active_nonzeros(model, act)).solve(J @ v + con[2])
 
 
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:

@@ -27,10 +27,10 @@ import scipy.sparse as sp
 from scipy.linalg.lapack import dgesv
 from scipy.sparse.linalg import splu
 
-from .banded import batch_from_nonzeros, for_model
+from .banded import batch_from_nonzeros, for_model, kkt_nz_function
 
 __all__ = ["KKT_SPARSE_FROM", "LDL_ROWS", "SINGULAR", "Solver", "SparseKKT", "Symbolic",
-           "batch", "blocks", "impact_map", "matrix", "solve_symbolic", "symbolic"]
+           "accelerations", "batch", "blocks", "impact_map", "matrix", "solve_symbolic", "symbolic"]
 
 
 def blocks(mass, Phi_q, free):
@@ -116,9 +116,11 @@ class SparseKKT:
         self.perm = order.data.astype(np.int64) - 1
         self.indices, self.indptr, self.n = order.indices, order.indptr, n
 
-    def solve(self, mass: np.ndarray, Phi_q: np.ndarray, free: np.ndarray,
-              rhs: np.ndarray) -> np.ndarray:
-        vals = Phi_q[self.jr, self.jc]
+    def solve(self, mass: np.ndarray, Phi_q: np.ndarray | None, free: np.ndarray,
+              rhs: np.ndarray, vals: np.ndarray | None = None) -> np.ndarray:
+        """The solution at Phi_q, or at its nonzeros ``vals`` (CSC order, CasADi's)."""
+        if vals is None:
+            vals = Phi_q[self.jr, self.jc]
         data = np.concatenate([mass, vals, vals, free])[self.perm]
         A = sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
         try:
@@ -174,6 +176,25 @@ class Solver:
         if info != 0:
             raise np.linalg.LinAlgError(SINGULAR)
         return sol[:nq], sol[nq:]
+
+
+def accelerations(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(q'', lambda) at one state, as :meth:`~cmm_dae.equations.model.Model.kkt` gives
+    them; where the KKT matrix is solved sparse (:data:`KKT_SPARSE_FROM`) from Phi_q's
+    nonzeros alone, never the dense Phi_q (A02 with 64 loops: 2.9 s of a 14-s run's
+    crossings, most of it evaluating and copying the dense matrix)."""
+    solver = model._kkt
+    if not solver.sparse or model.reacting:
+        return model.kkt(q, v, t, p)[:2]
+    p = model.fill(p, t, q, v)
+    kkt_nz_function(model)
+    vals, Qf, gamma = model.mapped("kkt_nz_fn", 1)(q, v, t, p)
+    if solver._sparse is None:
+        solver._sparse = SparseKKT(solver._sparsity, model.nq)
+    sol = solver._sparse.solve(model.mass, None, model.free_rows(p),
+                               np.concatenate([Qf, gamma]), vals)
+    return sol[:model.nq], sol[model.nq:]
 
 
 def impact_map(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,

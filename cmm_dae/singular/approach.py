@@ -14,6 +14,7 @@ from scipy.optimize import minimize_scalar
 
 from ..core.errors import SolverError, Status
 from ..equations.kinematics import dependent_rows, row_names, singular_ratio
+from ..equations.kkt import accelerations
 from ..equations.model import Model
 from .gauss import GL_C, accurate_step, gl2_step
 from .instant import singular_instant
@@ -74,7 +75,7 @@ def leaves_singular(model: Model, p: np.ndarray, t: float, q: np.ndarray,
     vnorm = float(np.max(np.abs(v), initial=0.0))
     if not (0.0 < r0 < PAST_RATIO and vnorm > 0.0):
         return False
-    a0 = model.kkt(q, v, t, p)[0]
+    a0 = accelerations(model, q, v, t, p)[0]
     rate = ratio_rate(model, p, t, q, v, a0, r0)
     if not rate > 0.0:
         return False
@@ -121,7 +122,7 @@ class Start:
     def at(cls, model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray,
            rule: tuple[str, int] | None, method: str = "ida") -> Start:
         r0 = ratio(model, q, t, p)
-        a0 = model.kkt(q, v, t, p)[0]
+        a0 = accelerations(model, q, v, t, p)[0]
         vnorm = float(np.max(np.abs(v), initial=0.0))
         rate = ratio_rate(model, p, t, q, v, a0, r0) if vnorm > 0.0 else 0.0
         return cls(model, p, t, q, v, rule, r0, a0, vnorm, rate, method)

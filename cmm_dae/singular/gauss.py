@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from ..equations.kinematics import project_state
+from ..equations.kkt import accelerations
 from ..equations.model import Model
 
 #: Gauss-Legendre, two stages (order 4): nodes and coefficients.
@@ -40,7 +41,7 @@ def gl2_step(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.ndarray
     given, the two stage accelerations (what :func:`dense` reads the step through)."""
     def acc(tt, qq, vv):
         q1, v1, _ = project(model, p, qq, vv, tt)
-        return model.kkt(q1, v1, tt, p)[0]
+        return accelerations(model, q1, v1, tt, p)[0]
 
     K = np.array([guess, guess])  # stage accelerations
     scale = 1.0 + float(np.max(np.abs(guess)))

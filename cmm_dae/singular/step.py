@@ -37,6 +37,7 @@ import numpy as np
 
 from ..core.errors import SolverError
 from ..equations.kinematics import dependent_rows, rank_drop
+from ..equations.kkt import accelerations
 from ..equations.model import Model
 from .approach import (  # noqa: F401 (the crossing's thresholds, importable from here)
     END_RATIO,
@@ -120,7 +121,7 @@ class Crossing:
         if i not in self._accels:
             t, q, v = self.ends[i]
             q1, v1, _ = project(model, p, q, v, t)
-            self._accels[i] = (q1, v1, model.kkt(q1, v1, t, p)[0])
+            self._accels[i] = (q1, v1, accelerations(model, q1, v1, t, p)[0])
         return self._accels[i]
 
     def end_accel(self, model: Model, p: np.ndarray, i: int) -> np.ndarray | None:
