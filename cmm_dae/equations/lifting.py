@@ -55,7 +55,7 @@ class Lifted:
 #: of the double-folded mechanism: 4 ms instead of 40). Bounded, the oldest first out.
 _SHAPES: OrderedDict[bytes, tuple[ca.Function, list[int]]] = OrderedDict()
 _SHAPES_LOCK = threading.Lock()  # (a background build lifts too)
-SHAPES_KEPT = 256
+SHAPES_KEPT = 64
 
 
 def lift(f: ca.Function, into: int | None = None, offset: int | None = None) -> Lifted:
