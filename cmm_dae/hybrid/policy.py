@@ -142,8 +142,8 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
     model = hs.model
     if triggers is None:
         triggers = event_list(model, hs.locked)
-    if not triggers:
-        return []
+    if not triggers or (values is not None and not np.min(values) < 0.0):
+        return []  # (every trigger below needs a negative value)
     if values is None:
         c, cd = model.joint_rates(q, v)
         needs_lam = any(tr.kind in (TK.PUSH, TK.SLIP) for tr in triggers)

@@ -27,6 +27,7 @@ from ..equations import kkt, rank
 from ..equations.codegen import Buffered
 from ..equations.model import Model
 from ..hybrid import policy as ev
+from . import cbuild, cstep
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
 
 
@@ -185,7 +186,7 @@ class IterativeIntegrator(Integrator):
         self.coords: list[str] = []
         self.key: tuple | None = None
         self.st: _Stepper | None = None
-        self._steps: dict[tuple, _CompiledStep] = {}
+        self._steps: dict[tuple, _CompiledStep | cstep.CStep] = {}
         self.triggers: list[ev.Trigger] | None = None  # this configuration's (None: ask)
 
     def output_times(self, t0: float, t1: float) -> np.ndarray:
@@ -272,9 +273,12 @@ class IterativeIntegrator(Integrator):
         return SegmentEnd(t, q, v, (), "end")
 
 
-    def _compiled_step(self) -> _CompiledStep | None:
-        """The configuration's compiled step (cached), None with Python load laws or
-        friction from the reaction (the Python step's KKT solves include it)."""
+    def _compiled_step(self) -> _CompiledStep | cstep.CStep | None:
+        """The configuration's step in one call (cached): in C (:mod:`.cstep`) where the
+        option ``compiled`` asks for it (``True``; ``"auto"``: where it is built, or where
+        builds are allowed, :func:`~.cbuild.auto_builds`), else on CasADi's virtual
+        machine; None with Python load laws or friction from the reaction (the Python
+        step's KKT solves include it)."""
         model, hs = self.model, self.hs
         if model.callables or model.reacting:
             return None
@@ -282,7 +286,12 @@ class IterativeIntegrator(Integrator):
         key = (tuple(self.coords), tuple(triggers), hs.mode())
         got = self._steps.get(key)
         if got is None:
-            got = self._steps[key] = _CompiledStep(model, hs, self.coords, triggers)
+            mode = self.opts.compiled
+            got = None if mode is False else cstep.build(
+                model, hs, self.coords, triggers, mode is True or cbuild.auto_builds())
+            if got is None:
+                got = _CompiledStep(model, hs, self.coords, triggers)
+            self._steps[key] = got
         return got
 
 

@@ -14,7 +14,8 @@ from ..integrators.contract import RunOptions
 #: The integration methods, by name (the classes are the runner's).
 METHOD_NAMES = ("ida", "iterative")
 #: The defaults of the options that belong to one method (``simulate``, ``run_dae`` and
-#: ``run_iterative`` take them from here): another value with the other method is refused.
+#: ``run_iterative`` take them from here): another value with the other method is refused
+#: (but ``compiled``, which both read: IDA's segments, the fixed step, in C).
 IDA_DEFAULTS = {"rtol": 1e-8, "atol": None, "output_dt": 0.01, "linsolver": "auto",
                 "compiled": "auto"}
 ITERATIVE_DEFAULTS = {"dt": 0.01, "output_every": 1}
@@ -63,7 +64,7 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
                            else ("iterative", ITERATIVE_DEFAULTS))
         bad += [Problem("run", k, f"applies to method=\"{other}\" only; this run is "
                         f"method=\"{method}\"") for k, d in defaults.items()
-                if given[k] is not d and given[k] != d]
+                if given[k] is not d and given[k] != d and k != "compiled"]  # (both's)
     if linsolver not in ("auto", "dense", "sparse"):
         bad.append(Problem("run", "linsolver", f"expected 'auto', 'dense' or 'sparse', "
                            f"got {linsolver!r}"))

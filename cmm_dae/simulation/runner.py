@@ -102,10 +102,8 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
     throw : bool
         Raise :class:`SolverError` on failure (True) or return the partial Result with
         ``status`` and ``message`` saying what happened (False).
-    model : Model or None
-        A prebuilt model of ``mech`` (saves the CasADi build).
-    progress : bool
-        A progress bar of the simulated time on stderr.
+    model, progress : Model or None, bool
+        A prebuilt model of ``mech`` (saves the CasADi build); a progress bar on stderr.
     branch : "continue" or (joint, sign)
         Which branch to take at a singular position: the branch of the motion (continuity
         of velocity), or the one on which ``joint``'s coordinate moves with ``sign`` (+1
@@ -118,7 +116,9 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         numbers to round-off. "auto": where the build is cached or short (built now), else
         Python, and once the model's runs took 2 s (and twice the build's estimate)
         together it is built in the background (said once); True: build now (without a
-        compiler or for Python load laws, a warning and Python); False: Python.
+        compiler or for Python load laws, a warning and Python); False: Python. Iterative:
+        each configuration's whole step in C (cached); "auto": where built, or built now
+        where builds are allowed; else on CasADi's virtual machine, same numbers.
     linsolver : {"auto", "dense", "sparse"}
         IDA's linear solver: dense LU, or sparse LU (SuperLU_MT) on the Jacobian's
         structural pattern; "auto": sparse from 120 IDA unknowns where at most 5 % of the
@@ -387,13 +387,14 @@ def run_iterative(mech: Mechanism, t_end: float = 10.0, *,
                   v_lock: float = 1e-6, max_events: int | None = None,
                   max_steps: int | None = None, throw: bool = True,
                   model: Model | None = None, progress: bool = False,
-                  branch: str | tuple[str, int] = "continue") -> Result:
+                  branch: str | tuple[str, int] = "continue",
+                  compiled: bool | str = "auto") -> Result:
     """:func:`simulate` with the paper's fixed-step algorithm (``method="iterative"``);
     ``stats.steps`` counts the fixed steps. See :func:`simulate` for the parameters."""
     require_mechanism(mech, "run_iterative")
     return simulate(mech, t_end, method="iterative", dt=dt, output_every=output_every,
                     v_lock=v_lock, max_events=max_events, max_steps=max_steps, throw=throw,
-                    model=model, progress=progress, branch=branch)
+                    model=model, progress=progress, branch=branch, compiled=compiled)
 
 
 __all__ = ["METHODS", "check_options", "run_dae", "run_iterative", "simulate"]
