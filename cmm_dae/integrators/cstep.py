@@ -18,7 +18,10 @@ as before.
 
 from __future__ import annotations
 
+import ctypes
+import hashlib
 import subprocess
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -34,24 +37,78 @@ __all__ = ["NEWTON_STEPS", "NEWTON_TOL", "STEP_BUDGET", "CStep", "build"]
 #: Newton iterations on the positions, and their tolerance on max |G| (the rootfinder's
 #: ``max_iter`` and ``abstol`` in the virtual machine's step, the Python step's too).
 NEWTON_STEPS, NEWTON_TOL = 25, 1e-13
-#: Most CasADi instructions of a step's SX parts compiled (the Newton iteration's QR on
-#: the dense position Jacobian grows as its cube): larger mechanisms keep the virtual
-#: machine's step.
-STEP_BUDGET = 20_000
+#: Most CasADi instructions of a step's SX parts compiled under ``compiled="auto"`` (a
+#: build of about 3 s; the Newton iteration's QR on the dense position Jacobian grows as
+#: its cube), and with ``compiled=True`` (four times as many): larger mechanisms keep the
+#: virtual machine's step.
+STEP_BUDGET = 12_000
+
+
+_SOURCE = Path(__file__).with_name("fixedstep.c")
+_loop: ctypes.CDLL | None = None
+
+
+def loop_driver() -> ctypes.CDLL:
+    """The C loop over fixed steps (``fixedstep.c``), built once per machine."""
+    global _loop
+    if _loop is None:
+        key = hashlib.sha256(_SOURCE.read_bytes()).hexdigest()[:20]
+        lib = ctypes.CDLL(str(build_library(f"fix_{key}", [_SOURCE])))
+        P, D, n, L = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.c_int, \
+            ctypes.c_long
+        x = ctypes.c_double
+        lib.cmm_fixed_run.restype = n
+        lib.cmm_fixed_run.argtypes = [P, P, n, n, D, x, x, L, n, x, D, D, D, D,
+                                      ctypes.POINTER(L), D, D, D, n, ctypes.POINTER(n)]
+        _loop = lib
+    return _loop
+
+
+#: Samples the C loop writes before it returns to Python (progress and Ctrl-C act then).
+CHUNK = 4096
 
 
 class CStep:
     """A configuration's compiled step: ``step(q, v, a, t, tn, p)`` -> (q1, v1, a1,
-    residual, event values), as :class:`~cmm_dae.integrators.iterative._CompiledStep`."""
+    residual, event values), as :class:`~cmm_dae.integrators.iterative._CompiledStep`;
+    :meth:`run` takes many of them in C."""
 
-    def __init__(self, fn: ca.Function, values: np.ndarray):
+    def __init__(self, fn: ca.Function, values: np.ndarray, lib: Path, nev: int):
         self.fn = Buffered(fn)
         self.values = values
         self._p = (None, None)  # (p, p with the constants)
+        self._lib = ctypes.CDLL(str(lib))  # (kept loaded while its addresses are used)
+        self._f = ctypes.cast(self._lib.cmm_step, ctypes.c_void_p).value
+        self._w = ctypes.cast(self._lib.cmm_step_work, ctypes.c_void_p).value
+        self.nev = nev
+
+    def _with_values(self, p: np.ndarray) -> np.ndarray:
+        if self._p[0] is not p:
+            self._p = (p, np.ascontiguousarray(np.concatenate([p, self.values])))
+        return self._p[1]
+
+    def run(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, t: float, n: int,
+            p: np.ndarray, dt: float, t_end: float, n_end: int, every: int, rmax: float
+            ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, int, tuple]:
+        """Fixed steps n + 1 ... in C (``fixedstep.c``) until one the caller must take
+        itself (a residual not below ``rmax``, a negative event value: flag 1), ``n_end``
+        or :data:`CHUNK` samples (flag 0): (flag, q, v, a, t, n, (T, Q, V) samples)."""
+        lib, D = loop_driver(), ctypes.POINTER(ctypes.c_double)
+        q, v, a = (np.array(x, dtype=float) for x in (q, v, a))
+        tt, nn, filled = ctypes.c_double(t), ctypes.c_long(n), ctypes.c_int(0)
+        nq = q.size
+        T, Q, V = np.empty(CHUNK), np.empty((CHUNK, nq)), np.empty((CHUNK, nq))
+        pw = self._with_values(p)
+        flag = lib.cmm_fixed_run(
+            self._f, self._w, nq, self.nev, pw.ctypes.data_as(D), dt, t_end, n_end, every,
+            rmax, q.ctypes.data_as(D), v.ctypes.data_as(D), a.ctypes.data_as(D),
+            ctypes.byref(tt), ctypes.byref(nn), T.ctypes.data_as(D), Q.ctypes.data_as(D),
+            V.ctypes.data_as(D), CHUNK, ctypes.byref(filled))
+        k = filled.value
+        return flag, q, v, a, tt.value, nn.value, (T[:k], Q[:k], V[:k])
 
     def __call__(self, q, v, a, t, tn, p):
-        if self._p[0] is not p:
-            self._p = (p, np.concatenate([p, self.values]))
+        self._with_values(p)
         try:
             q1, v1, a1, r, vals = self.fn(q, v, a, t, tn, self._p[1])
         except RuntimeError:
@@ -100,13 +157,14 @@ def _parts(model: Model, hs: ev.HybridState, kidx: list[int], act: list[int],
 
 
 def step_function(model: Model, hs: ev.HybridState, coords: list[str],
-                  triggers: list[ev.Trigger]) -> tuple[ca.Function, np.ndarray] | None:
+                  triggers: list[ev.Trigger], budget: int = STEP_BUDGET
+                  ) -> tuple[ca.Function, np.ndarray] | None:
     """The step as one MX function of (q, v, a, t, tn, p with the constants), and the
-    constants; None where its SX parts are more than :data:`STEP_BUDGET` instructions."""
+    constants; None where its SX parts are more than ``budget`` instructions."""
     kidx = [model.jidx[n] for n in coords]
     act = [int(i) for i in model.active_rows(hs.p)]
     parts = _parts(model, hs, kidx, act, triggers)
-    if sum(f.n_instructions() for f, _ in parts.values()) > STEP_BUDGET:
+    if sum(f.n_instructions() for f, _ in parts.values()) > budget:
         return None
     at, lifted = model.n_params, {}
     for name, (f, ip) in parts.items():  # each reads its constants from p's tail in turn
@@ -143,20 +201,22 @@ def step_function(model: Model, hs: ev.HybridState, coords: list[str],
 
 
 def build(model: Model, hs: ev.HybridState, coords: list[str], triggers: list[ev.Trigger],
-          make: bool) -> CStep | None:
+          mode: bool | str, make: bool) -> CStep | None:
     """The configuration's compiled step from the cache, or built now with ``make``;
     None where it is not built (``make`` False), cannot be (no C compiler, a failed
-    build) or is too large (:data:`STEP_BUDGET`)."""
+    build) or is too large (:data:`STEP_BUDGET`; four times that with ``mode`` True)."""
     if c_compiler() is None:
         return None
-    got = step_function(model, hs, coords, triggers)
+    got = step_function(model, hs, coords, triggers,
+                        4 * STEP_BUDGET if mode is True else STEP_BUDGET)
     if got is None:
         return None
     fn, values = got
     try:
         lib = build_library(function_key([fn]), None, [fn], build=make)
+        loop_driver()
     except NotBuiltError:
         return None
     except (OSError, subprocess.SubprocessError, RuntimeError):
         return None  # the virtual machine's step gives the same numbers
-    return CStep(external("cmm_step", str(lib)), values)
+    return CStep(external("cmm_step", str(lib)), values, lib, len(triggers))

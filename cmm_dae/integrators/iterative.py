@@ -222,6 +222,17 @@ class IterativeIntegrator(Integrator):
         model, hs, opts, st = self.model, self.hs, self.opts, self.st
         k, cfg, p = st.kidx, hs.current(), hs.p
         while self.n < self.n_steps:
+            if isinstance(fast, cstep.CStep):  # in C up to a step the loop below must see
+                n0 = self.n
+                flag, q, v, a, t, self.n, (T, Q, V) = fast.run(
+                    q, v, a, t, self.n, p, opts.dt, opts.t_end, self.n_steps,
+                    opts.output_every, 1e-9)
+                self.stats.steps += self.n - n0
+                rec.add_block(T, Q, V, cfg)
+                if opts.progress is not None and self.n > n0:
+                    opts.progress.update(t)
+                if self.n >= self.n_steps or (flag == 0 and self.n > n0):
+                    continue
             self.n += 1
             t_new = min(self.n * opts.dt, opts.t_end)
             h = t_new - t
@@ -288,7 +299,7 @@ class IterativeIntegrator(Integrator):
         if got is None:
             mode = self.opts.compiled
             got = None if mode is False else cstep.build(
-                model, hs, self.coords, triggers, mode is True or cbuild.auto_builds())
+                model, hs, self.coords, triggers, mode, mode is True or cbuild.auto_builds())
             if got is None:
                 got = _CompiledStep(model, hs, self.coords, triggers)
             self._steps[key] = got

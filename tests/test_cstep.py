@@ -1,0 +1,90 @@
+"""The fixed-step algorithm in C (integrators/cstep.py, fixedstep.c): the same run as the
+step on CasADi's virtual machine to round-off (its Newton iteration unrolled, symbolic QR
+instead of LU), the C loop the same as stepping one call at a time to the last bit, and
+parameter variants on their structure's build."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import cmm_dae as cd
+from cmm_dae.integrators import cbuild, cstep
+
+pytestmark = [pytest.mark.skipif(cbuild.c_compiler() is None, reason="needs a C compiler"),
+              pytest.mark.timeout(240)]
+#: the module shares one build cache (the fixture below)
+SHARED_CACHE = True
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache(tmp_path_factory):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
+def _same_run(a: cd.Result, b: cd.Result, q_tol: float) -> None:
+    assert [(e.kind, e.joint, e.side) for e in a.events] == [
+        (e.kind, e.joint, e.side) for e in b.events]
+    assert max((abs(x.t - y.t) for x, y in zip(a.events, b.events, strict=True)),
+               default=0.0) <= 1e-12
+    assert np.array_equal(a.t, b.t)
+    assert np.max(np.abs(a.data["q"] - b.data["q"])) <= q_tol
+    for d in a.meta["drivers"]:
+        assert np.max(np.abs(a.driver(d).effort - b.driver(d).effort)) <= 1e-10
+
+
+@pytest.mark.parametrize(("name", "t_end"), [("double_folded", 10.0), ("pendulum_stop", 3.0),
+                                             ("slotted_link", 3.0),
+                                             ("stick_slip_block", 4.0)])
+def test_compiled_fixed_step_is_the_virtual_machines(name, t_end):
+    mech = cd.load(cd.example(name))
+    model = cd.Model(mech)
+    c = cd.run_iterative(mech, t_end, dt=1e-3, model=model, compiled=True)
+    vm = cd.run_iterative(mech, t_end, dt=1e-3, model=model, compiled=False)
+    # positions where the step converged: within 1e-12 of each other (LU and QR)
+    _same_run(c, vm, 1e-12)
+
+
+def test_the_c_loop_is_stepping_one_call_at_a_time(monkeypatch):
+    mech = cd.load(cd.example("double_folded"))
+    model = cd.Model(mech)
+    loop = cd.run_iterative(mech, 10.0, dt=1e-3, model=model, compiled=True)
+    calls = []
+
+    def none_in_c(self, q, v, a, t, n, p, *args):  # every step through iterative.py
+        calls.append(n)
+        return 1, q, v, a, t, n, (np.zeros(0), np.zeros((0, q.size)), np.zeros((0, q.size)))
+
+    monkeypatch.setattr(cstep.CStep, "run", none_in_c)
+    one = cd.run_iterative(mech, 10.0, dt=1e-3, model=model, compiled=True)
+    assert len(calls) >= 10_000  # it did step one call at a time
+    _same_run(loop, one, 0.0)
+    assert np.array_equal(loop.driver("A").effort, one.driver("A").effort)
+
+
+def test_variants_run_on_the_structures_build(tmp_path, monkeypatch):
+    monkeypatch.setenv("CMM_DAE_CACHE", str(tmp_path))
+    mech = cd.load(cd.example("slider_crank_stop"))
+    base = cd.run_iterative(mech, 2.0, dt=1e-3, compiled=True)
+    built = sorted(os.listdir(tmp_path))
+    var = cd.with_params(mech, {"bodies.slider.mass": 0.37})
+    c = cd.run_iterative(var, 2.0, dt=1e-3, compiled=True)
+    vm = cd.run_iterative(var, 2.0, dt=1e-3, compiled=False)
+    assert sorted(os.listdir(tmp_path)) == built  # nothing built again
+    _same_run(c, vm, 1e-12)
+    assert not np.allclose(c.driver("A").effort, base.driver("A").effort)  # its own numbers
+
+
+def test_python_load_laws_keep_the_python_step():
+    mech = cd.load(cd.example("pendulum_stop"))
+    law = cd.Law(func=lambda t, c, r: -0.05 * r)  # a damper written in Python
+    var = mech.replace(loads={"hand": cd.Load("hand", law, joint="O")})
+    c = cd.run_iterative(var, 1.0, dt=1e-3, compiled=True)
+    vm = cd.run_iterative(var, 1.0, dt=1e-3, compiled=False)
+    assert np.array_equal(c.data["q"], vm.data["q"])  # the same (Python) step
+    plain = cd.run_iterative(mech, 1.0, dt=1e-3, compiled=False)
+    assert not np.allclose(c.data["q"], plain.data["q"])  # and the law acts
