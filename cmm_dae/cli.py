@@ -32,16 +32,16 @@ from .cli_commands import (
 from .core.errors import CmmError, SolverError
 
 
-def _compiled_flags(parser: argparse.ArgumentParser) -> None:
+def _compiled_flags(parser: argparse.ArgumentParser, what: str = "IDA's segments") -> None:
     """--compiled / --no-compiled (one of them); neither: "auto" (C where the build is
     cached or short)."""
     p = parser.add_mutually_exclusive_group()
     p.add_argument("--compiled", dest="compiled", action="store_const", const=True,
-                   default="auto", help="run IDA's segments in C, built now if need be "
+                   default="auto", help=f"run {what} in C, built now if need be "
                    "(needs a C compiler; cached); default: in C where built already or "
                    "where the build is short")
     p.add_argument("--no-compiled", dest="compiled", action="store_const", const=False,
-                   help="run IDA's segments in Python")
+                   help=f"run {what} in Python (CasADi's virtual machine)")
 
 
 def _branch(text: str) -> str | tuple[str, int]:
@@ -105,6 +105,7 @@ def _simulating(sub) -> None:
     i.add_argument("--csv", help="write every series to this CSV file")
     i.add_argument("--save", help="save the Result to this .npz file")
     i.add_argument("--force", action="store_true", help="overwrite --csv / --save files")
+    _compiled_flags(i, "the fixed steps")
     i.set_defaults(func=_iterate)
 
     c = sub.add_parser("compare", help="IDA vs the iterative algorithm: report with figures")

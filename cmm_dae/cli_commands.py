@@ -94,7 +94,7 @@ def _iterate(args: argparse.Namespace) -> int:
 
     _refuse_overwrite((args.csv, args.save), args.force)
     res = simulate(_load(args.model), args.t_end, method="iterative", dt=args.dt,
-                   progress=args.progress, throw=False)
+                   progress=args.progress, throw=False, compiled=args.compiled)
     return _finish(res, args)
 
 

@@ -45,6 +45,7 @@ def test_compiled_fixed_step_is_the_virtual_machines(name, t_end):
     model = cd.Model(mech)
     c = cd.run_iterative(mech, t_end, dt=1e-3, model=model, compiled=True)
     vm = cd.run_iterative(mech, t_end, dt=1e-3, model=model, compiled=False)
+    assert c.meta["compiled"] and not vm.meta["compiled"]
     # positions where the step converged: within 1e-12 of each other (LU and QR)
     _same_run(c, vm, 1e-12)
 
@@ -88,3 +89,15 @@ def test_python_load_laws_keep_the_python_step():
     assert np.array_equal(c.data["q"], vm.data["q"])  # the same (Python) step
     plain = cd.run_iterative(mech, 1.0, dt=1e-3, compiled=False)
     assert not np.allclose(c.data["q"], plain.data["q"])  # and the law acts
+
+
+def test_cli_iterate_says_which_step_ran(capsys):
+    from cmm_dae.cli import main
+
+    assert main(["iterate", "pendulum_stop", "--t-end", "0.2", "--dt", "0.001",
+                 "--compiled"]) == 0
+    assert "(iterative, in C)" in capsys.readouterr().out
+    assert main(["iterate", "pendulum_stop", "--t-end", "0.2", "--no-compiled"]) == 0
+    assert "(iterative)" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["iterate", "pendulum_stop", "--compiled", "--no-compiled"])

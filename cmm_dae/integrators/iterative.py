@@ -188,6 +188,8 @@ class IterativeIntegrator(Integrator):
         self.st: _Stepper | None = None
         self._steps: dict[tuple, _CompiledStep | cstep.CStep] = {}
         self.triggers: list[ev.Trigger] | None = None  # this configuration's (None: ask)
+        #: a compiled step the run used (a Result's meta "compiled"), else None
+        self.c: cstep.CStep | None = None
 
     def output_times(self, t0: float, t1: float) -> np.ndarray:
         return self._grid_inside(self.opts.dt * self.opts.output_every, t0,
@@ -303,6 +305,8 @@ class IterativeIntegrator(Integrator):
             if got is None:
                 got = _CompiledStep(model, hs, self.coords, triggers)
             self._steps[key] = got
+        if isinstance(got, cstep.CStep):
+            self.c = got
         return got
 
 
