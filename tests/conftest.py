@@ -31,6 +31,15 @@ os.environ["CMM_DAE_CACHE"] = tempfile.mkdtemp(prefix="cmm_dae_tests_")
 atexit.register(shutil.rmtree, os.environ["CMM_DAE_CACHE"], ignore_errors=True)
 
 
+@pytest.fixture(scope="module")
+def module_cache(tmp_path_factory):
+    """One build cache for a module's tests (a module that sets ``SHARED_CACHE = True``
+    and uses this fixture): the driver and each model compile once for all of them."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _empty_compiled_cache(request, tmp_path_factory, monkeypatch):
     """Each test starts with no compiled library built: compiled="auto" (the default) then

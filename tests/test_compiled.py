@@ -20,17 +20,10 @@ from cmm_dae.description import iftomm
 from cmm_dae.equations import banded
 from cmm_dae.integrators import cbuild, csegment
 
-pytestmark = pytest.mark.skipif(cbuild.c_compiler() is None, reason="needs a C compiler")
-#: the module shares one build cache (the fixture below), not one per test (conftest)
+pytestmark = [pytest.mark.skipif(cbuild.c_compiler() is None, reason="needs a C compiler"),
+              pytest.mark.usefixtures("module_cache")]
+#: the module shares one build cache (conftest's module_cache), not one per test
 SHARED_CACHE = True
-
-
-@pytest.fixture(scope="module", autouse=True)
-def cache(tmp_path_factory):
-    """One build cache for the module (the driver and each model compile once)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cache")))
-        yield
 
 
 def _same(a: cd.Result, b: cd.Result, series: dict[str, tuple[np.ndarray, np.ndarray]]):

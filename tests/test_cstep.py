@@ -14,16 +14,9 @@ import cmm_dae as cd
 from cmm_dae.integrators import cbuild, cstep
 
 pytestmark = [pytest.mark.skipif(cbuild.c_compiler() is None, reason="needs a C compiler"),
-              pytest.mark.timeout(240)]
-#: the module shares one build cache (the fixture below)
+              pytest.mark.timeout(240), pytest.mark.usefixtures("module_cache")]
+#: the module shares one build cache (conftest's module_cache)
 SHARED_CACHE = True
-
-
-@pytest.fixture(scope="module", autouse=True)
-def cache(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("CMM_DAE_CACHE", str(tmp_path_factory.mktemp("cache")))
-        yield
 
 
 def _same_run(a: cd.Result, b: cd.Result, q_tol: float) -> None:
