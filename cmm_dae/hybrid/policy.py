@@ -157,7 +157,9 @@ def crossings(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float,
             crossed = val < -1e-12 * (1.0 + abs(hs.limit_value(tr.joint, tr.side)))
         elif tr.kind == TK.ZONE:  # beyond round-off too: a jaw locked on its stop at a
             # zone's edge read +-2e-16 off it step after step, 140 zone events in 5 s
-            crossed = val < -1e-12 * (1.0 + max(map(abs, model.zone_info[tr.joint][1:])))
+            edge = max((abs(x) for x in model.zone_info[tr.joint][1:] if math.isfinite(x)),
+                       default=0.0)  # (a zone may be open on one side)
+            crossed = val < -1e-12 * (1.0 + edge)
         elif tr.kind in (TK.PUSH, TK.SLIP):
             crossed = val < 0.0 and hs.stayed.get(tr.joint) != t
         else:
