@@ -294,6 +294,9 @@ class IterativeIntegrator(Integrator):
         step's KKT solves include it)."""
         model, hs = self.model, self.hs
         if model.callables or model.reacting:
+            if self.opts.compiled is True:  # said as IDA's compiled segment says it
+                cbuild._warn_once(f"compiled fixed step not used ({cbuild._unsupported(model)})"
+                                  ": running the Python step")
             return None
         triggers = self.triggers = ev.event_list(model, hs.locked)
         key = (tuple(self.coords), tuple(triggers), hs.mode())
@@ -303,6 +306,10 @@ class IterativeIntegrator(Integrator):
             got = None if mode is False else cstep.build(
                 model, hs, self.coords, triggers, mode, mode is True or cbuild.auto_builds())
             if got is None:
+                if mode is True:
+                    cbuild._warn_once("compiled fixed step not used (no C compiler, a failed "
+                                      "build or a step too large to compile): running its "
+                                      "step on CasADi's virtual machine")
                 got = _CompiledStep(model, hs, self.coords, triggers)
             self._steps[key] = got
         if isinstance(got, cstep.CStep):
