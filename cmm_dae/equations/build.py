@@ -44,7 +44,9 @@ def _rot(th):
 
 @dataclass(frozen=True)
 class Constraints:
-    """Constraint values at (q, t): ``phi`` (m,), ``Phi_q`` (m, nq), ``Phi_t`` (m,)."""
+    """Constraint values at (q, t): ``phi`` (m,), ``Phi_q`` (m, nq), ``Phi_t`` (m,)
+    (:func:`~.kinematics.active_constraints`: the rows in force, Phi_q's of a long chain
+    as :class:`~.minnorm.SparseRows`)."""
 
     phi: np.ndarray
     Phi_q: np.ndarray

@@ -12,6 +12,7 @@ from scipy.linalg import qr
 from scipy.linalg.lapack import dpbtrf
 
 from . import banded, bandsvd, rank
+from .build import Constraints
 from .minnorm import QR_ROWS, SPARSE_FILL, SPARSE_ROWS, MinNorm, SparseRows  # noqa: F401
 from .model import Model
 from .unknowns import ground_pins
@@ -57,22 +58,22 @@ def active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
 
 
 def active_constraints(model: Model, q: np.ndarray, t: float, p: np.ndarray,
-                       act: np.ndarray) -> tuple:
-    """The rows ``act`` of (phi, Phi_q, Phi_t) at (q, t): Phi_q's as :class:`SparseRows`
+                       act: np.ndarray) -> Constraints:
+    """The rows ``act`` of the constraints at (q, t); their Phi_q as :class:`SparseRows`
     from its nonzeros alone where the rows are many (:func:`active_nonzeros`; A02 with 64
     loops: the dense 386 x 387 Phi_q took 5.4 of a 14-s run's crossings), else dense."""
     nz = active_nonzeros(model, act)
     if nz is None:
         con = model.constraints(q, t, p)
-        return con.phi[act], con.Phi_q[act], con.Phi_t[act]
+        return Constraints(con.phi[act], con.Phi_q[act], con.Phi_t[act])
     banded.constraints_nz_function(model)  # (built once)
     phi, vals, Phi_t = model.mapped("con_nz_fn", 1)(q, t, p)
-    return (phi[act], SparseRows(vals[_csc_index(model, act)], *nz, (act.size, model.nq)),
-            Phi_t[act])
+    return Constraints(phi[act], SparseRows(vals[_csc_index(model, act)], *nz,
+                                            (act.size, model.nq)), Phi_t[act])
 
 
 def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarray,
-            rcond: float | None) -> tuple[np.ndarray, tuple | None]:
+            rcond: float | None) -> tuple[np.ndarray, Constraints | None]:
     """Minimum-norm Newton iterations onto the rows ``act``: q, and the constraints'
     rows there (:func:`active_constraints`; None when the iterations ran out after a last
     correction)."""
@@ -84,14 +85,14 @@ def _newton(model: Model, q: np.ndarray, t: float, p: np.ndarray, act: np.ndarra
     solver: MinNorm | None = None
     for _ in range(10):
         con = active_constraints(model, q, t, p, act)
-        r = con[0]
+        r = con.phi
         r_max = float(np.max(np.abs(r), initial=0.0))
         if r_max < tol or (r_max < 10 * tol and not r_max < r_prev):
             return q, con  # met, or no longer falling at round-off level
         # the last factorization while it still converges fast (a simplified Newton
         # step); a new one where it did not shrink the residual tenfold
         if solver is None or not r_max < 0.1 * r_prev:
-            solver = MinNorm(con[1], rcond, active_nonzeros(model, act))
+            solver = MinNorm(con.Phi_q, rcond)
         r_prev = r_max
         q = q - solver.solve(r)
     return q, None
@@ -119,15 +120,16 @@ def project_positions(model: Model, q: np.ndarray, t: float, p: np.ndarray,
 
 
 def project_velocities(model: Model, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
-                       rcond: float | None = None, con: tuple | None = None) -> np.ndarray:
+                       rcond: float | None = None, con: Constraints | None = None
+                       ) -> np.ndarray:
     """Minimal-norm correction of v onto ``Phi_q v + Phi_t = 0`` (active rows; ``rcond``
     as in :func:`project_state`; ``con``: their :func:`active_constraints` at (q, t)
     where known)."""
     act = model.active_rows(p)
     if con is None:
         con = active_constraints(model, q, t, p, act)
-    J = con[1]
-    return v - MinNorm(J, rcond, active_nonzeros(model, act)).solve(J @ v + con[2])
+    J = con.Phi_q
+    return v - MinNorm(J, rcond).solve(J @ v + con.Phi_t)
 
 
 def singular_ratio(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> float:

@@ -59,8 +59,7 @@ class MinNorm:
     cut-off, numpy's SVD-based ``lstsq``.
     """
 
-    def __init__(self, J: np.ndarray | SparseRows, rcond: float | None = None,
-                 nonzeros: tuple[np.ndarray, np.ndarray] | None = None):
+    def __init__(self, J: np.ndarray | SparseRows, rcond: float | None = None):
         self.rcond = rcond
         self.qr: tuple[np.ndarray, np.ndarray] | None = None
         self.lu = None
@@ -69,10 +68,7 @@ class MinNorm:
         sparse = isinstance(J, SparseRows)
         self._J, self._sparse = (None, J) if sparse else (J, None)
         if rcond is None and SPARSE_ROWS <= m <= n:
-            if sparse:
-                nonzeros = (J.rows, J.cols)
-            elif nonzeros is None:
-                nonzeros = np.nonzero(J)
+            nonzeros = (J.rows, J.cols) if sparse else np.nonzero(J)
             self.lu = _augmented_lu(m, n, nonzeros, J.vals if sparse else J[nonzeros])
             if self.lu is not None:
                 return

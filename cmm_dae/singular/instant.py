@@ -40,7 +40,7 @@ def null_vectors(model: Model, p: np.ndarray, q: np.ndarray, t: float
     (:func:`_smallest_sparse`: A02 with 128 loops, 770 x 771 rows, 150 ms each by the SVD,
     3 s of a 2-s run's crossings)."""
     act = model.active_rows(p)
-    _, J, _ = active_constraints(model, q, t, p, act)
+    J = active_constraints(model, q, t, p, act).Phi_q
     large = isinstance(J, SparseRows) and J.shape[0] >= SPARSE_ROWS
     got = _smallest_sparse(J) if large else None
     if got is None:
@@ -95,7 +95,7 @@ def _signed(model: Model, p: np.ndarray, w: np.ndarray, n: np.ndarray, q: np.nda
     """``w . (Phi_q n)``: the smallest singular value with a sign, for w, n held fixed;
     it passes zero where the motion passes the singular position."""
     act = model.active_rows(p)
-    return float(w[act] @ (active_constraints(model, q, t, p, act)[1] @ n))
+    return float(w[act] @ (active_constraints(model, q, t, p, act).Phi_q @ n))
 
 
 def singular_instant(model: Model, p: np.ndarray, ends: list, t_guess: float) -> float:
