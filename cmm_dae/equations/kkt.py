@@ -157,12 +157,9 @@ class Solver:
         """Accelerations and multipliers from the evaluated parts at parameters ``p``."""
         model = self.model
         nq = model.nq
-        rhs = np.concatenate([Qf, gamma])
         if self.sparse:
-            if self._sparse is None:
-                self._sparse = SparseKKT(self._sparsity, nq)
-            sol = self._sparse.solve(model.mass, Phi_q, model.free_rows(p), rhs)
-            return sol[:nq], sol[nq:]
+            return self.solve_nonzeros(None, Qf, gamma, p, Phi_q)
+        rhs = np.concatenate([Qf, gamma])
         key = p[:model.n_switches].tobytes()  # the configuration, not callable loads
         tpl = self._templates.get(key)
         if tpl is None:
@@ -175,6 +172,18 @@ class Solver:
         _, _, sol, info = dgesv(A, rhs)
         if info != 0:
             raise np.linalg.LinAlgError(SINGULAR)
+        return sol[:nq], sol[nq:]
+
+    def solve_nonzeros(self, vals: np.ndarray | None, Qf: np.ndarray, gamma: np.ndarray,
+                       p: np.ndarray, Phi_q: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`solve` by the sparse LU from Phi_q's nonzeros ``vals`` (CasADi's CSC
+        order), or from the dense ``Phi_q`` where ``vals`` is None."""
+        model, nq = self.model, self.model.nq
+        if self._sparse is None:
+            self._sparse = SparseKKT(self._sparsity, nq)
+        sol = self._sparse.solve(model.mass, Phi_q, model.free_rows(p),
+                                 np.concatenate([Qf, gamma]), vals)
         return sol[:nq], sol[nq:]
 
 
@@ -190,11 +199,7 @@ def accelerations(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndar
     p = model.fill(p, t, q, v)
     kkt_nz_function(model)
     vals, Qf, gamma = model.mapped("kkt_nz_fn", 1)(q, v, t, p)
-    if solver._sparse is None:
-        solver._sparse = SparseKKT(solver._sparsity, model.nq)
-    sol = solver._sparse.solve(model.mass, None, model.free_rows(p),
-                               np.concatenate([Qf, gamma]), vals)
-    return sol[:model.nq], sol[model.nq:]
+    return solver.solve_nonzeros(vals, Qf, gamma, p)
 
 
 def impact_map(model: Any, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray,
