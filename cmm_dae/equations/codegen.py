@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shlex
@@ -93,6 +94,13 @@ def map_width(k: int, size: int) -> int:
     base = max(8, 1 << max(k - 1, 1).bit_length() - 1)  # k <= 2 base
     return min(size, next(w for w in (base, 5 * base // 4, 3 * base // 2, 7 * base // 4,
                                       2 * base) if w >= k))
+
+
+def addresses(lib: ctypes.CDLL, name: str) -> tuple[int, int]:
+    """Addresses of a generated function ``name`` in a loaded library and of its
+    work-size query (``name_work``), for C code that calls it."""
+    return (ctypes.cast(getattr(lib, name), ctypes.c_void_p).value,
+            ctypes.cast(getattr(lib, f"{name}_work"), ctypes.c_void_p).value)
 
 
 def c_compiler() -> list[str] | None:

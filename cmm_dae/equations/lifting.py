@@ -105,7 +105,8 @@ def lift(f: ca.Function, into: int | None = None, offset: int | None = None) -> 
             while len(_SHAPES) > SHAPES_KEPT:
                 _SHAPES.popitem(last=False)
     g, consts = got
-    return Lifted(g, np.array([f.instruction_constant(k) for k in consts], dtype=float))
+    return Lifted(g, np.array([_swig.Function_instruction_constant(f, k) for k in consts],
+                              dtype=float))
 
 
 def _rebuild(f: ca.Function, ids: list[int], ins: list, outs: list, into: int | None,

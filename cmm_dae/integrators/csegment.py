@@ -29,7 +29,7 @@ from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.progress import Bar
 from ..equations import banded, compiled, kkt
-from ..equations.codegen import build_library, function_key
+from ..equations.codegen import addresses, build_library, function_key
 from ..equations.lifting import lift
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -120,12 +120,6 @@ def available() -> str | None:
     return _driver_error
 
 
-def _pointers(lib: ctypes.CDLL, name: str) -> tuple[int, int]:
-    """Addresses of a generated function and of its work-size query."""
-    return (ctypes.cast(getattr(lib, name), _P).value,
-            ctypes.cast(getattr(lib, f"{name}_work"), _P).value)
-
-
 @dataclass
 class SegmentRun:
     """What a segment returns, in the shape of scikit-sundae's result (rows from t0)."""
@@ -202,8 +196,8 @@ class CompiledModel:
                                                      build=build)))
         finally:
             post.join()
-        self.res = _pointers(self.fns, res.name())
-        self.jac = _pointers(self.fns, jac.name())
+        self.res = addresses(self.fns, res.name())
+        self.jac = addresses(self.fns, jac.name())
         self._events: dict[tuple, Events] = {}
 
     def event_functions(self, key: tuple, lean: ca.Function, hs: ev.HybridState,
@@ -223,8 +217,8 @@ class CompiledModel:
                 funcs.append(fn)
                 values += vals
             lib = ctypes.CDLL(str(build_library(function_key(funcs), None, funcs)))
-            got = Events(lib, _pointers(lib, "cmm_ev"),
-                         _pointers(lib, "cmm_evx") if exact else (None, None),
+            got = Events(lib, addresses(lib, "cmm_ev"),
+                         addresses(lib, "cmm_evx") if exact else (None, None),
                          np.concatenate([self.values, *values]))
             self._events[key] = got
         return got

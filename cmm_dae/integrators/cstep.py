@@ -27,7 +27,14 @@ import casadi as ca
 import numpy as np
 
 from ..equations import kkt
-from ..equations.codegen import Buffered, NotBuiltError, build_library, c_compiler, function_key
+from ..equations.codegen import (
+    Buffered,
+    NotBuiltError,
+    addresses,
+    build_library,
+    c_compiler,
+    function_key,
+)
 from ..equations.lifting import external, lift
 from ..equations.model import Model
 from ..hybrid import policy as ev
@@ -76,16 +83,15 @@ class CStep:
     def __init__(self, fn: ca.Function, values: np.ndarray, lib: Path, nev: int):
         self.fn = Buffered(fn)
         self.values = values
-        self._p = (None, None)  # (p, p with the constants)
+        self._pw = np.concatenate([np.full(fn.nnz_in(5) - values.size, np.nan), values])
         self._lib = ctypes.CDLL(str(lib))  # (kept loaded while its addresses are used)
-        self._f = ctypes.cast(self._lib.cmm_step, ctypes.c_void_p).value
-        self._w = ctypes.cast(self._lib.cmm_step_work, ctypes.c_void_p).value
+        self._f, self._w = addresses(self._lib, "cmm_step")
         self.nev = nev
 
     def _with_values(self, p: np.ndarray) -> np.ndarray:
-        if self._p[0] is not p:
-            self._p = (p, np.ascontiguousarray(np.concatenate([p, self.values])))
-        return self._p[1]
+        """``p`` followed by the step's constants (one array, refilled: no copy a step)."""
+        self._pw[:p.size] = p
+        return self._pw
 
     def run(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, t: float, n: int,
             p: np.ndarray, dt: float, t_end: float, n_end: int, every: int, rmax: float
@@ -108,9 +114,8 @@ class CStep:
         return flag, q, v, a, tt.value, nn.value, (T[:k], Q[:k], V[:k])
 
     def __call__(self, q, v, a, t, tn, p):
-        self._with_values(p)
         try:
-            q1, v1, a1, r, vals = self.fn(q, v, a, t, tn, self._p[1])
+            q1, v1, a1, r, vals = self.fn(q, v, a, t, tn, self._with_values(p))
         except RuntimeError:
             return q, v, a, np.inf, None
         r = float(r[0])

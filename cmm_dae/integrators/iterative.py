@@ -293,10 +293,11 @@ class IterativeIntegrator(Integrator):
         machine; None with Python load laws or friction from the reaction (the Python
         step's KKT solves include it)."""
         model, hs = self.model, self.hs
-        if model.callables or model.reacting:
+        why = cbuild._unsupported(model)
+        if why is not None:
             if self.opts.compiled is True:  # said as IDA's compiled segment says it
-                cbuild._warn_once(f"compiled fixed step not used ({cbuild._unsupported(model)})"
-                                  ": running the Python step")
+                cbuild._warn_once(f"compiled fixed step not used ({why}): running the "
+                                  "Python step")
             return None
         triggers = self.triggers = ev.event_list(model, hs.locked)
         key = (tuple(self.coords), tuple(triggers), hs.mode())
