@@ -26,28 +26,6 @@ from cmm_dae.description import iftomm
 cd.simulate(iftomm.a02_four_bar(int(sys.argv[1])), 2.0, rtol=float(sys.argv[2]))
 """
 
-# MuJoCo's process must not import cmm_dae (its import would be timed too): the start of
-# cmm_dae.studies.peers.a02_mujoco_prepared is written out here again
-MUJOCO = """
-import sys
-import numpy as np
-import mujoco
-from mujoco import rollout
-n, path, h = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
-model = mujoco.MjModel.from_xml_path(path)
-data = mujoco.MjData(model)
-for i in range(n + 1):
-    data.qvel[model.joint(f"G{i}").dofadr[0]] = 1.0
-    if i:
-        data.qvel[model.joint(f"L{i}").dofadr[0]] = -1.0
-mujoco.mj_forward(model, data)
-spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-state = np.empty(mujoco.mj_stateSize(model, spec))
-mujoco.mj_getState(model, data, state, spec)
-rollout.rollout(model, mujoco.MjData(model), state[None, :], nstep=int(round(2.0 / h)))
-"""
-
-
 def wall(args: list[str]) -> float:
     t0 = time.perf_counter()
     subprocess.run([sys.executable, *args], check=True, capture_output=True, timeout=600)
@@ -61,12 +39,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rtol", type=float, default=1e-5,
                     help="cmm_dae's rtol (1e-5: MuJoCo's error at h 1e-2, or better)")
     args = ap.parse_args(argv)
-    from cmm_dae.studies import peers
+    from cmm_dae.studies import mujoco_a02, peers
 
+    # MuJoCo's process runs that module by its path: it imports nothing of cmm_dae
+    mj = mujoco_a02.__file__
     with tempfile.TemporaryDirectory() as tmp:
-        cmm, mj = Path(tmp) / "cmm.py", Path(tmp) / "mj.py"
+        cmm = Path(tmp) / "cmm.py"
         cmm.write_text(CMM)
-        mj.write_text(MUJOCO)
         print(f"{'loops':>5}  {'MuJoCo s':>9}  {'cmm_dae s':>9}  {'ratio':>6}")
         for n in args.loops:
             xml = Path(tmp) / f"a02_{n}.xml"

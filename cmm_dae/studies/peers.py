@@ -31,6 +31,7 @@ from ..core.errors import CmmError
 from ..description import iftomm
 from ..simulation.runner import run_dae
 from .bench import best_times
+from .mujoco_a02 import start_state
 
 __all__ = ["COLUMNS", "RATIO_NOTE", "RTOLS", "a02_mujoco", "cheapest", "columns", "compare_a02",
            "chain_row", "error_a02", "header", "mujoco_available", "peer", "peers_table"]
@@ -102,15 +103,7 @@ def a02_mujoco_prepared(n: int, t_end: float, h: float = 1e-2):
     from mujoco import rollout
 
     model = mujoco.MjModel.from_xml_string(_a02_xml(n, h))
-    data = mujoco.MjData(model)
-    for i in range(n + 1):  # the parallelogram turning at 1 rad/s: cranks +1 about y,
-        data.qvel[model.joint(f"G{i}").dofadr[0]] = 1.0  # couplers translating
-        if i:
-            data.qvel[model.joint(f"L{i}").dofadr[0]] = -1.0
-    mujoco.mj_forward(model, data)
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    state = np.empty(mujoco.mj_stateSize(model, spec))
-    mujoco.mj_getState(model, data, state, spec)
+    state = start_state(mujoco, model, n)
     steps = int(round(t_end / h))
     work = mujoco.MjData(model)
 
