@@ -199,7 +199,13 @@ def test_the_order_one_trap_loosens_the_velocities_at_most_1000x(monkeypatch):
     the run so far kept."""
     from cmm_dae.integrators import suppress
 
-    monkeypatch.setattr(suppress.TrapCheck, "__call__", lambda self, nst: nst >= 5)
+    def stuck_after_five(self, trapped=lambda: None) -> bool:
+        if self.steps() >= 5:
+            trapped()
+            return True
+        return False
+
+    monkeypatch.setattr(suppress.TrapCheck, "__call__", stuck_after_five)
     with pytest.raises(cd.SolverError, match=r"stuck at order 1 .* atol raised 1000x") as info:
         cd.simulate(cd.load(ROOT / "models" / "double_folded.toml"), 1.0, compiled=False)
     assert info.value.status is cd.Status.INTEGRATOR

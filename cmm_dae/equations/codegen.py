@@ -184,7 +184,11 @@ def build_library(key: str, sources: list[Path] | None, funcs: list[ca.Function]
         # built in 13.7 s instead of 25.9 s, its segment and post-processing as fast
         # (15.24 ms a 2-s run's segments either way); hand-written C at -O2
         opt = "-O1" if funcs else "-O2"
-        subprocess.run([*cc, opt, "-fPIC", "-shared", *files, "-o", str(tmp), *flags],
+        # no fused multiply-adds where the target has them (aarch64 by default): the C
+        # functions round as CasADi's virtual machine does, so the compiled path and the
+        # Python path take the same steps
+        subprocess.run([*cc, opt, *BUILD_FLAGS.split(), "-fPIC", "-shared", *files, "-o",
+                        str(tmp), *flags],
                        check=True, capture_output=True, timeout=600)
         stamp_tmp.write_text(f"{key} {tmp.stat().st_size} {_digest(tmp)}\n")
         # the stamp first, then the library, each atomic: a process that finds the
@@ -214,6 +218,11 @@ _KEYS_LOCK = threading.Lock()  # a background build asks too
 KEYS_KEPT = 64
 
 
+#: What the functions' libraries are compiled with beyond the optimization level, in their
+#: key: a library built otherwise (before -ffp-contract=off) is never taken for one of these.
+BUILD_FLAGS = "-ffp-contract=off"
+
+
 def function_key(funcs: list[ca.Function]) -> str:
     """A short hash naming the library of ``funcs``, computed once for the same function
     objects: serializing them took 40 ms of every 0.01-s run of A02 with 32 loops under
@@ -224,7 +233,8 @@ def function_key(funcs: list[ca.Function]) -> str:
         if got is not None:
             _KEYS.move_to_end(ids)
             return got[1]
-    key = hashlib.sha256(b"".join(f.serialize().encode() for f in funcs)).hexdigest()[:20]
+    key = hashlib.sha256(BUILD_FLAGS.encode()
+                         + b"".join(f.serialize().encode() for f in funcs)).hexdigest()[:20]
     with _KEYS_LOCK:
         _KEYS[ids] = (list(funcs), key)
         while len(_KEYS) > KEYS_KEPT:

@@ -266,8 +266,9 @@ def _schur_batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.
     """(a, lambda) of every sample by :func:`schur_functions`; None if one is singular."""
     n, m = t.size, model.m
     schur_functions(model)
-    if getattr(model, "outputs_compiled", False) and model.post_kkt_fn is not None:
-        # in C: 5.2x on the double-folded mechanism; a singular S gives inf or nan
+    if model.post_kkt_fn is not None:
+        # in C where compiled (5.2x on the double-folded mechanism), else on CasADi's
+        # virtual machine: the same numbers on both paths; a singular S gives inf or nan
         out = model.mapped("post_kkt_fn", n)(q.T, v.T, t, P.T)
         a, lam = (np.asarray(x).reshape(-1, n).T for x in out)
         if np.all(np.isfinite(lam)):

@@ -28,11 +28,12 @@ import sksundae  # loads the SUNDIALS libraries into the process before the driv
 from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.progress import Bar
-from ..equations import banded, compiled, kkt
+from ..equations import banded, compiled
 from ..equations.codegen import addresses, build_library, function_key
 from ..equations.lifting import lift
 from ..equations.model import Model
 from ..hybrid import policy as ev
+from .exact_events import exact_parts
 
 __all__ = ["CHUNK", "CompiledModel", "Events", "Extremes", "SegmentRun", "available",
            "check_version", "driver"]
@@ -225,26 +226,13 @@ class CompiledModel:
 
     def _exact(self, hs: ev.HybridState, triggers: list[ev.Trigger], at: int
                ) -> tuple[ca.Function, list[np.ndarray]]:
-        """The exact event values of (t, y, p): the KKT system and the event values built
-        as SX functions and lifted (their constants from ``p[at:]``), the solve between
-        them in MX (a QR, which has no SX form); the constants."""
-        model = self.model
-        t, y, p = ca.SX.sym("t"), ca.SX.sym("y", model.ida.N), ca.SX.sym("p", model.n_params)
-        q, v, _ = model.ida.symbolic(y)
-        system = kkt.symbolic(model, q, v, t, p)
-        lam = ca.SX.sym("lam", model.m)
-        c, cd = model.cvel_fn(q, v)
-        vals: list = [None] * len(triggers)
-        ev.event_values(hs, c, cd, lam, triggers, vals, where=ca.if_else)
-        sys_l = lift(ca.Function("cmm_kkt", [t, y, p], [system.A, system.b]), 2, at)
-        ev_l = lift(ca.Function("cmm_evl", [y, lam, p], [ca.vertcat(*vals)]), 2,
-                    at + sys_l.values.size)
-        tm, ym = ca.MX.sym("t"), ca.MX.sym("y", model.ida.N)
-        pm = ca.MX.sym("p", at + sys_l.values.size + ev_l.values.size)
-        A, b = sys_l.fn(tm, ym, pm[:sys_l.fn.nnz_in(2)])  # (the front: its constants')
-        lam_m = system.unpack(kkt.solve_symbolic(A, b))[1]
-        return (ca.Function("cmm_evx", [tm, ym, pm], [ca.vertcat(1.0, ev_l.fn(ym, lam_m, pm))]),
-                [sys_l.values, ev_l.values])
+        """The exact event values of (t, y, p) (:mod:`.exact_events`, as the Python path
+        evaluates them) with the constants of its two SX parts read from ``p[at:]``; the
+        constants."""
+        parts = exact_parts(self.model, hs, triggers)
+        sys_l = lift(parts.system, 2, at)
+        ev_l = lift(parts.values, 2, at + sys_l.values.size)
+        return parts.compose(sys_l.fn, ev_l.fn), [sys_l.values, ev_l.values]
 
     def run(self, p: np.ndarray, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             atol: np.ndarray, rtol: float, first_step: float, min_step: float,

@@ -32,9 +32,7 @@ from .extremes import driver_watch, keep_extremes
 from .ida_callbacks import IdaCallbacks
 from .ida_steps import (
     CRAWL_STEP,
-    _CrawlError,
     _own_steps,
-    _StalledError,
     failure,
     quiet_sundials,
     segment_start,
@@ -179,7 +177,6 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         first_step, q, v, y0, yp0, t_stop = self._begin(t0, q, v)
         solver = self._solver(first_step)
         tspan = segment_times(self.opts, t0, t_stop)
-        self.outputs = set(tspan.tolist())  # (IDA's landing on the stop time: not a step)
         r = self._solve(solver, tspan, y0, yp0, first_step, t0)
         T, Y = np.asarray(r.t), np.asarray(r.y)
         failed = r.status < 0 or self.crawled  # steps in place are a failure there
@@ -277,7 +274,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         model, opts, hs, u = self.model, self.opts, self.hs, self.u
         self.p[:] = hs.p
         first_step, self.first_step = self.first_step, 0.0
-        self.n_steps, self.in_place, self.t_last = 0, 0, -math.inf
+        self.n_steps, self.in_place, self.t_last = 0, 0, t0
         self.interrupted = self.stalled = self.crawled = self.trapped = False
         self.step_budget = opts.max_steps - self.stats.steps
         # A state taken from IDA's interpolant at a root satisfies the constraints only to
@@ -330,10 +327,6 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                     self._events(t, y, yp, out)
             except KeyboardInterrupt:
                 self.interrupted = True
-            except _StalledError:
-                self.stalled = self.interrupted = True
-            except _CrawlError:
-                self.crawled = self.interrupted = True
             except Exception as e:  # noqa: BLE001 - kept, raised with the samples so far
                 self.error, self.t_error = e, self.t_last
             if self.interrupted or self.error is not None:
@@ -385,7 +378,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                     start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
                     r = _own_steps(solver, tspan, y0, yp0, self._interrupt,
                                    self.opts.output_dt is not None, self.watch,
-                                   self.u.lam.start, self._trap)
+                                   self.u.lam.start, self._trap, self._after_step)
+                self.n_steps = r.steps  # (IDA's count with the last step, as in C)
         except CmmError:
             raise
         except Exception as e:  # an exception in a callback aborts IDA: say so plainly

@@ -7,16 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.memo import once
 from ..equations.model import Buffered
 from ..hybrid import policy as ev
 from . import csegment
+from .exact_events import exact_parts
 from .ida_steps import (
     IN_PLACE_STEPS,
     OUTGROWN,
     ROUNDOFF_ATOL,
     SLOW_STEPS,
-    _CrawlError,
-    _StalledError,
     first_tout,
 )
 from .tolerances import natural_step
@@ -62,25 +62,28 @@ class IdaCallbacks:
             JJ[nq:2 * nq, :nq] -= dq
             JJ[nq:2 * nq, nq:2 * nq] -= dv
 
+    def _after_step(self, t: float, nst: int) -> bool:
+        """After each of IDA's steps on the Python path (step ``nst`` of the segment by
+        IDA's count, ending at ``t``), the checks the compiled segment makes after each of
+        its steps, in its order: more than IN_PLACE_STEPS steps in a row that do not move
+        t (IDA halving next to a singular position), or SLOW_STEPS steps short of the
+        segment's natural first step, are a crawl; more steps than the run's budget a
+        stall. True ends the segment there."""
+        if t - self.t_last > self.crawl_step:
+            self.in_place = 0
+        else:
+            self.in_place += 1
+            self.crawled = self.in_place > IN_PLACE_STEPS
+        if nst == SLOW_STEPS and t - self.t_start < self.h_natural:
+            self.crawled = True
+        self.t_last, self.n_steps = t, nst
+        self.stalled = not self.crawled and nst > self.step_budget
+        if self.opts.progress is not None:
+            self.opts.progress.update(t)
+        return self.crawled or self.stalled
+
     def _events(self, t, y, yp, out):
-        # IDA checks the roots after every successful step (at the step's end, or at the
-        # output time when the step passed it): count steps here.
-        if t >= self.t_last and t not in self.outputs:
-            if t - self.t_last > self.crawl_step:
-                self.in_place = 0
-            else:  # a step too short to move t: IDA halving next to a singular position
-                self.in_place += 1
-                if self.in_place > IN_PLACE_STEPS:
-                    raise _CrawlError
-            self.t_last = t
-            self.n_steps += 1
-            if self.n_steps > self.step_budget:
-                raise _StalledError
-            if self.n_steps == SLOW_STEPS and t - self.t_start < self.h_natural:
-                raise _CrawlError
-            if self.opts.progress is not None:
-                self.opts.progress.update(t)
-        out[0] = 1.0  # keeps the root function alive for counting; never crosses zero
+        out[0] = 1.0  # (below zero only to end the segment: a Ctrl-C, an exception)
         if not self.triggers:
             return
         self.y_in[:] = y
@@ -96,15 +99,23 @@ class IdaCallbacks:
         out[:] = self.ev_out
 
     def _exact_events(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
-        """Event values with the lock forces of a KKT solve at (q, v, t)."""
+        """Event values with the lock forces of a KKT solve at (q, v, t): the compiled
+        segment's own graph (:mod:`.exact_events`), or with friction from the reaction
+        (a nonlinear system) the model's solve."""
         model = self.model
         p = model.fill(self.p, t, q, v)
-        c, cd, Phi_q, Qf, gamma = model.event_parts(q, v, t, p)
-        if model.reacting:  # friction from the reaction: the KKT system is nonlinear
+        if model.reacting:
+            c, cd, _, _, _ = model.event_parts(q, v, t, p)
             _, lam, _ = model.kkt(q, v, t, p)
-        else:
-            _, lam, _ = model.kkt_from(Phi_q, Qf, gamma, p)
-        ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
+            ev.event_values(self.hs, c, cd, lam, self.triggers, self.ev_out[1:])
+            return
+        key = ("exact events", self.ev_key)
+        fn = self._ev_cache.get(key)
+        if fn is None:
+            hs, triggers = self.hs, list(self.triggers)
+            fn = self._ev_cache[key] = Buffered(once(
+                model, key, lambda: exact_parts(model, hs, triggers).compose()))
+        self.ev_out[:] = fn(t, self.y_in, p)[0]
 
     def _roundoff_atol(self, y: np.ndarray, check: bool = False) -> bool:
         """Raise the absolute tolerances of positions and of velocities to the round-off

@@ -194,7 +194,8 @@ def first_tout(t0: float, t_stop: float) -> float:
 
 def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                interrupted=lambda: None, grid: bool = False,
-               watch: np.ndarray | None = None, ncol: int = 0, trapped=lambda: None):
+               watch: np.ndarray | None = None, ncol: int = 0, trapped=lambda: None,
+               after_step=lambda t, nst: False):
     """IDA stepping on its own from tspan[0] to tspan[-1] (the end as stop time; a root,
     the stop time or a failure ends it): its steps, or with ``grid`` the output times
     ``tspan[1:]`` read from IDA's interpolant after the step that passes them (and the
@@ -205,7 +206,8 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
     with the run: 54 us per step over 100 s, 135 over 1000 s). A Ctrl-C between two
     steps ends it as a root would, ``interrupted()`` told, the samples so far kept. The
     extremes of the entries ``watch`` of y over the steps come back as ``extremes``. IDA
-    stuck at order 1 (:class:`~.suppress.TrapCheck`) ends it too, ``trapped()`` told."""
+    stuck at order 1 (:class:`~.suppress.TrapCheck`) ends it too, ``trapped()`` told, as
+    does ``after_step(t, nst)`` returning True (given each step's end and IDA's count)."""
     t_end = float(tspan[-1])
     first = solver.init_step(float(tspan[0]), y0, yp0)
     ts, ys = [first.t], [first.y]
@@ -220,8 +222,7 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             x = solver.step(t_end if nst else first_tout(float(tspan[0]), t_end),
                             method="onestep", tstop=t_end)
             nst += 1
-            if x.status == 0 and trap(nst):
-                trapped()
+            if x.status == 0 and (after_step(x.t, trap.steps()) or trap(trapped)):
                 x = SimpleNamespace(t=x.t, y=x.y, status=2, message="", i_events=None,
                                     nfev=x.nfev, njev=x.njev)
             if x.status >= 0:
@@ -246,18 +247,10 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
         # a root return (status 2) that the caller reads as the interruption
         return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=2, message="",
                                i_events=None, nfev=x.nfev, njev=x.njev,
-                               extremes=track.extremes())
+                               extremes=track.extremes(), steps=trap.steps())
     return SimpleNamespace(t=np.array(ts), y=np.array(ys), status=x.status,
                            message=x.message, i_events=x.i_events, nfev=x.nfev,
-                           njev=x.njev, extremes=track.extremes())
-
-
-class _StalledError(Exception):
-    """Raised inside the root function when the run's step budget is spent."""
-
-
-class _CrawlError(Exception):
-    """Raised inside the root function when IDA's steps no longer move t."""
+                           njev=x.njev, extremes=track.extremes(), steps=trap.steps())
 
 
 #: Smallest absolute tolerance of positions and velocities, relative to the largest of

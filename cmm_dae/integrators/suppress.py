@@ -74,16 +74,27 @@ class TrapCheck:
         self.mem, self.lib = _memory(solver), _ida()
         self.nst = self.nef = 0
 
-    def __call__(self, nst: int) -> bool:
-        """Whether IDA, now at step ``nst`` of the segment, is trapped."""
+    def steps(self) -> int:
+        """IDA's own count of its steps in the segment (as the compiled segment reports
+        it: a root return or the stop time is no step of its own)."""
+        n = ctypes.c_long()
+        self.lib.IDAGetNumSteps(self.mem, ctypes.byref(n))
+        return n.value
+
+    def __call__(self, trapped=lambda: None) -> bool:
+        """Whether IDA, now at its step :meth:`steps` of the segment, is trapped (then
+        ``trapped()`` is told)."""
+        nst = self.steps()
         if nst - self.nst < TRAP_WINDOW:
             return False
         nef, k = ctypes.c_long(), ctypes.c_int()
         self.lib.IDAGetNumErrTestFails(self.mem, ctypes.byref(nef))
         self.lib.IDAGetLastOrder(self.mem, ctypes.byref(k))
-        trapped = k.value == 1 and nef.value - self.nef >= TRAP_WINDOW * 4 // 5
+        stuck = k.value == 1 and nef.value - self.nef >= TRAP_WINDOW * 4 // 5
         self.nst, self.nef = nst, nef.value
-        return trapped
+        if stuck:
+            trapped()
+        return stuck
 
 
 @functools.cache
