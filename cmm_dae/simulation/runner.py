@@ -113,13 +113,12 @@ def simulate(mech: Mechanism, t_end: float = 10.0, *, method: str = "ida",
         without stopping (the rule is applied at each one's instant).
     compiled : bool or "auto"
         IDA: each configuration segment in C (built with the C compiler, cached), the
-        same steps and numbers bit for bit (a band LU: to round-off). "auto": where the
-        build is cached or short (built now), else Python, and once the model's runs took
-        2 s (and twice the build's estimate) together it is built in the background (said
-        once); True: build now (without a compiler or for Python load laws, a warning and
-        Python); False: Python. Iterative:
-        each configuration's whole step in C (cached); "auto": where built, or built now
-        where builds are allowed; else on CasADi's virtual machine, same numbers.
+        same numbers bit for bit. "auto": where the build is cached or short (built now),
+        else Python, and once the model's runs took 2 s (and twice the build's estimate)
+        together it is built in the background (said once); True: build now (without a
+        compiler or for Python load laws, a warning and Python); False: Python.
+        Iterative: each configuration's whole step in C (cached); "auto": where built,
+        or built now where builds are allowed; else on CasADi's virtual machine.
     linsolver : {"auto", "dense", "sparse"}
         IDA's linear solver: dense LU, or sparse LU (SuperLU_MT) on the Jacobian's
         structural pattern; "auto": sparse from 120 IDA unknowns where at most 5 % of the
