@@ -10,6 +10,7 @@ multiply-adds, which round otherwise).
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 import pytest
@@ -71,6 +72,9 @@ def test_same_stall_as_python_path():
         got.append(info.value.result)
     _same(*got)
     assert got[0].status is Status.STALLED
+    # the squeezer is not stuck: it spins (about 736 rad/s, 0.0085 rad a step, at 0.0345 s)
+    assert re.search(r"joint 'beta' moves at \d+(\.\d+)? rad/s \(0\.00\d+ rad a step\): "
+                     r"a fast motion", str(info.value))
 
 
 def test_internal_steps_and_table_driver():
@@ -98,6 +102,10 @@ def test_step_budget_keeps_partial_result():
     # interval (a few steps of 0.01 s here), and keeps the samples so far
     assert part is not None and 0.0 < part.t[-1] < 10.0 and 300 < part.stats.steps < 400
     assert part.status == "stalled" and np.all(np.diff(part.t) >= 0.0)
+    # the slow cycle is not called a fast motion: its steps' average and the other causes
+    h = part.t[-1] / part.stats.steps
+    assert f"({h:.2g} s each on average: a run this long needs more" in str(err.value)
+    assert "a fast motion" not in str(err.value)
 
 
 _RUN = ("import cmm_dae as cd; r = cd.run_dae(cd.load(cd.example('pendulum_stop')), 0.5, "

@@ -38,6 +38,7 @@ from .ida_steps import (
     segment_start,
     segment_times,
     sparse_solver,
+    stall_message,
 )
 from .suppress import start_suppressed, suppressed
 from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
@@ -252,11 +253,8 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                                   "atol raised 1000x: try another rtol", status=Status.INTEGRATOR)
             return SegmentEnd(t1, q1, v1, (), "restart")
         if r.status == 2 and self.stalled:
-            raise SolverError(
-                f"stalled at t = {t1:.9g} s: more than {opts.max_steps} IDA steps "
-                "in this run (tiny steps: a grazing contact, a near-singular position or "
-                "forces too stiff for the tolerances); raise max_steps to go on",
-                status=Status.STALLED)
+            raise SolverError(stall_message(self.model, t1, q1, v1, opts.max_steps,
+                                            self.stats.steps), status=Status.STALLED)
         if r.status == 2 and self.interrupted:
             raise KeyboardInterrupt
         if r.status == 2:  # IDA_ROOT_RETURN: a terminal event ended the segment

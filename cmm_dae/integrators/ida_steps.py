@@ -253,6 +253,32 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                            njev=x.njev, extremes=track.extremes(), steps=trap.steps())
 
 
+#: A joint that moves this much (rad or m) in an average step of the run makes a spent
+#: step budget a fast motion, not a crawl (Andrews' squeezer spun up to 7,900 rad/s by
+#: 0.74 s, 0.012 rad a step; a grazing contact crawls at 1e-8 a step).
+FAST_STEP = 1e-3
+
+
+def stall_message(model, t: float, q: np.ndarray, v: np.ndarray, max_steps: int,
+                  steps: int) -> str:
+    """What a spent step budget at (t, q, v) says: the run's average step (s) and, where
+    a joint moves at least :data:`FAST_STEP` in one (a fast motion, not tiny steps), that
+    joint and its rate."""
+    h = t / max(steps, 1)
+    head = f"stalled at t = {t:.9g} s: more than {max_steps} IDA steps in this run"
+    names = model.joint_names
+    rates = np.abs(model.joint_rates(q, v)[1][:len(names)]) if names else np.zeros(0)
+    k = int(np.argmax(rates)) if rates.size else -1
+    if k >= 0 and np.isfinite(rates[k]) and rates[k] * h >= FAST_STEP:
+        unit = "rad" if model.mech.joints[names[k]].type == "revolute" else "m"
+        return (f"{head}, {h:.2g} s each on average, and joint '{names[k]}' moves at "
+                f"{rates[k]:.4g} {unit}/s ({rates[k] * h:.2g} {unit} a step): a fast motion, "
+                "not tiny steps; raise max_steps or end the run earlier")
+    return (f"{head} ({h:.2g} s each on average: a run this long needs more, or the "
+            "steps became tiny: a grazing contact, a near-singular position or forces too "
+            "stiff for the tolerances); raise max_steps to go on")
+
+
 #: Smallest absolute tolerance of positions and velocities, relative to the largest of
 #: each at a segment's start (10 units of round-off): IDA's Newton iteration cannot meet
 #: a tolerance below the round-off of the state it solves for.
