@@ -13,12 +13,13 @@ from ..equations.kkt import impact_map
 from .state import (
     HybridState,
     Transition,
+    idle_slide,
     impulses,
     joint_acceleration,
     over_constrained,
 )
 
-__all__ = ["slip_free", "stick_or_slip"]
+__all__ = ["held_joints", "slip_free", "stick_or_slip"]
 
 
 def _direction(force: float) -> int:
@@ -37,6 +38,27 @@ def _begin_slip(hs: HybridState, t: float, joint: str, force: float, before: int
                  side=Side.POSITIVE if s > 0 else Side.NEGATIVE, before=before,
                  after=hs.current(), velocity_before=rate, velocity_after=rate,
                  release_force=float(force))
+
+
+def _immobile(hs: HybridState, q: np.ndarray, t: float) -> bool:
+    """Whether the configuration in force leaves the mechanism no motion at all: its
+    active rows fix every coordinate (rank nq) and none depends on time (no driver moves
+    it). A joint whose rate merely passes zero where its lock would be redundant for an
+    instant (the rod pin of a slider-crank while the crank passes upright) is not so."""
+    model = hs.model
+    p = hs.params_of(hs.locked)
+    con = model.constraints(q, t, p)
+    act = model.active_rows(p)
+    return not np.any(con.Phi_t[act] != 0.0) and \
+        np.linalg.matrix_rank(con.Phi_q[act]) >= model.nq
+
+
+def held_joints(hs: HybridState) -> list[str]:
+    """Frictional joints neither locked nor slipping (nor the slide of a contact that
+    does not touch): held at rest by the locks of others (:func:`stick_or_slip`); a
+    release that lets the mechanism move decides them again."""
+    return [j for j in hs.model.frictional if j not in hs.locked and j not in hs.slip
+            and not idle_slide(hs.model, j, hs.locked)]
 
 
 def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -62,11 +84,29 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     trial = {**hs.locked, joint: "stick"}
     hs.stick_at[joint] = float(c[k])
     if over_constrained(hs, trial, q, t):
+        if _immobile(hs, q, t):
+            # the other joints' locks hold the mechanism at rest (a slider-crank whose
+            # slider stuck): no lock of its own, which would repeat theirs, no friction of its
+            # own to reverse at every round-off sign of its rate (a storm of slip events
+            # at rates of 1e-42), until a release lets it move (:func:`held_joints`)
+            hs.stick_at.pop(joint, None)
+            hs.slip = slip
+            return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
+                                    before=before, after=hs.current(),
+                                    velocity_before=float(cd[k]),
+                                    velocity_after=float(cd[k]),
+                                    note="held at rest by the other joints' locks"), q, v)
         # the drivers (and locks) fix this joint's motion: it cannot stick of its own (a
         # press's slide at its dead centre, whose rate only passes zero); it goes on
         # slipping the way the drivers move it, the friction reversed with its rate
-        acc, _ = joint_acceleration(hs, q, v, t, joint, hs.locked)
-        s = 1 if acc > 0.0 else -1 if acc < 0.0 else -hs.slip.get(joint, 1)
+        # the way it moves on: already reversed (the fixed-step algorithm meets the
+        # reversal a step late), else the way it accelerates from rest
+        old = hs.slip.get(joint, 1)
+        if cd[k] * old < 0.0:
+            s = -old
+        else:
+            acc, _ = joint_acceleration(hs, q, v, t, joint, hs.locked)
+            s = 1 if acc > 0.0 else -1 if acc < 0.0 else -old
         hs.stick_at.pop(joint, None)
         hs.slip = {**slip, joint: s}
         return Transition(Event(t=t, kind=EventKind.SLIP, joint=joint,
@@ -82,6 +122,9 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     try:
         _, lam, _ = model.kkt(q, v0, t, p)
     except np.linalg.LinAlgError as e:  # no consistent forces with the joint at rest
+        on = _slip_on(hs, q, v, t, joint, slip, before, float(cd[k]))
+        if on is not None:
+            return on
         raise SolverError(
             f"friction jam at t = {t:.9g} s: joint '{joint}' comes to rest and neither "
             "sticking nor slipping is consistent: the friction from the reactions would lock "
@@ -98,3 +141,33 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
                                 impulses=impulses(model, imp), energy_lost=lost,
                                 release_force=float(force)), q, v0)
     return Transition(_begin_slip(hs, t, joint, force, before, float(cd[k])), q, v)
+
+
+def _slip_on(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+             slip: dict, before: int, rate: float) -> Transition | None:
+    """A joint at rest whose sticking has no consistent forces slips on the other way
+    where that is consistent: forces that solve with its friction reversed and a motion
+    that goes that way (already moving so, or accelerating so from rest); None where it
+    is not (a jam). So passes a joint whose rate crosses zero next to a position where its
+    lock would leave the mechanism no consistent motion (a slider-crank's rod pin while
+    the crank passes upright): the fixed-step algorithm meets it a step late, where the
+    stick trial's forces are near-singular and friction from the reaction makes them
+    inconsistent; IDA, at the located instant, found the lock's rows dependent."""
+    model = hs.model
+    k = model.jidx[joint]
+    s = (1 if rate > 0.0 else -1) if rate != 0.0 else -hs.slip.get(joint, 1)
+    trial = {**slip, joint: s}
+    try:
+        a, _, _ = model.kkt(q, v, t, hs.params_of(hs.locked, slip=trial))
+    except np.linalg.LinAlgError:
+        return None
+    acc = float(model.joint_accelerations(q, v, a, t)[k])
+    if rate == 0.0 and acc * s < 0.0:
+        return None
+    hs.stick_at.pop(joint, None)
+    hs.slip = trial
+    return Transition(Event(t=t, kind=EventKind.SLIP, joint=joint,
+                            side=Side.POSITIVE if s > 0 else Side.NEGATIVE, before=before,
+                            after=hs.current(), velocity_before=rate, velocity_after=rate,
+                            note="sticking has no consistent forces here: the joint "
+                                 "slips on, its friction reversed"), q, v)

@@ -28,7 +28,7 @@ from ..equations.kinematics import (
 )
 from ..equations.kkt import impact_map
 from ..equations.model import Model
-from .friction import slip_free, stick_or_slip
+from .friction import held_joints, slip_free, stick_or_slip
 from .state import (
     ZENO_DT,
     HybridState,
@@ -259,13 +259,21 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
         return [stick_or_slip(hs, q, v, t, tr.joint)]
     force = hs.lock_force(q, v, t, tr.joint)
     if tr.kind == TK.SLIP:
-        return [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)]
+        return _decide_held(hs, [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)], t)
     if would_reenter(hs, q, v, t, tr.joint, tr.side) and \
             t - hs.stayed.get(tr.joint, -math.inf) > ZENO_DT:
         hs.stayed[tr.joint] = t  # stays locked: no chattering
         return []
     away = 1 if tr.side == "lower" else -1  # a frictional joint slides off its stop
-    return [Transition(release(hs, q, v, t, tr.joint, force, away), q, v)]
+    return _decide_held(hs, [Transition(release(hs, q, v, t, tr.joint, force, away), q, v)],
+                        t)
+
+
+def _decide_held(hs: HybridState, out: list[Transition], t: float) -> list[Transition]:
+    """After a release: the joints the released lock held at rest stick or slip again."""
+    for joint in held_joints(hs):
+        out.append(stick_or_slip(hs, out[-1].q, out[-1].v, t, joint))
+    return out
 
 
 def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
