@@ -24,7 +24,7 @@ def test_jacobian_against_finite_differences(name):
     y, yp = rng.normal(size=N), rng.normal(size=N)
     t, cj = 0.37, 123.0
     p = model.params()
-    J = np.asarray(model.jac_fn(t, y, yp, cj, p)).T  # stored transposed for row-major IDA
+    J = model.jac_sparse_fn(t, y, yp, cj, p).full()
     h = 1e-6
     fd = np.zeros((N, N))
     for k in range(N):

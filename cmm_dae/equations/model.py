@@ -158,7 +158,6 @@ class Model:
                 self.ida.res_fn, self.ida.jac_fn = funcs
                 self.compiled = True
 
-
     def _functions(self, e: SimpleNamespace) -> None:
         """The numeric CasADi functions of the model from its expressions ``e`` (with the
         parameters theta at their values): constraints, coordinates, KKT parts, outputs,
@@ -228,8 +227,8 @@ class Model:
         J = ca.jacobian(F, y) + cj * ca.jacobian(F, yp)
         self.N = int(y.numel())
         self.res_fn = ca.Function("res", [t, y, yp, p], [F])
-        # Transposed: CasADi writes column-major, scikit-sundae's JJ is row-major.
-        self.jac_fn = ca.Function("resjac", [t, y, yp, cj, p], [ca.densify(J.T)])
+        # (no dense Jacobian of the model's own: IDA's is :attr:`ida`'s, built where its
+        # dense solver asks; densifying A02's with 32 loops, 778 x 778, took 74 of 210 ms)
         #: the Jacobian's nonzeros in CSC order (scikit-sundae's sparse solver) and its
         #: structural pattern
         self.jac_sparse_fn = ca.Function("resjac_sp", [t, y, yp, cj, p], [J])

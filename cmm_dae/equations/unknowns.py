@@ -122,8 +122,7 @@ class Unknowns:
         J = ca.vertcat(ca.mtimes(core_jac(ta, yc, ypc, cj, pa), S),
                        ca.jacobian(Fw, y) + cj * ca.jacobian(Fw, yp))
         self.res_fn = self.res_sx = ca.Function("ida_res", [ta, y, yp, pa], [F])
-        # transposed, as the model's: CasADi writes column-major, scikit-sundae row-major
-        self.jac_fn = ca.Function("ida_resjac", [ta, y, yp, cj, pa], [ca.densify(J.T)])
+        self._jac: ca.Function | tuple = (J, [ta, y, yp, cj, pa])  # (built where asked)
         self.jac_sparse_fn = ca.Function("ida_resjac_sp", [ta, y, yp, cj, pa], [J])
         self.jac_pattern = J.sparsity()
 
@@ -195,6 +194,20 @@ class Unknowns:
         self._maps: dict[int, Buffered] = {}
         return (ca.Function("core_res", [t, y, yp, p], [F]),
                 ca.Function("core_jac", [t, y, yp, cj, p], [J]))
+
+    @property
+    def jac_fn(self) -> ca.Function:
+        """IDA's Jacobian as a dense matrix, transposed as the model's (CasADi writes
+        column-major, scikit-sundae row-major); built on first use: the dense solver's
+        (a sparse or compiled segment takes :attr:`jac_sparse_fn`)."""
+        if not isinstance(self._jac, ca.Function):
+            J, args = self._jac
+            self._jac = ca.Function("ida_resjac", args, [ca.densify(J.T)])
+        return self._jac
+
+    @jac_fn.setter
+    def jac_fn(self, fn: ca.Function) -> None:
+        self._jac = fn
 
     @property
     def reduced(self) -> bool:
