@@ -3,11 +3,16 @@ joint's rate, for a motor)."""
 
 from __future__ import annotations
 
+import math
+import reprlib
+from typing import Any
+
 import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..description.mechanism import Driver, Law
+from ..core.errors import ModelError, Problem
+from ..description.mechanism import Driver, Law, Mechanism
 
 
 def driver_expr(d: Driver, t: ca.SX) -> ca.SX:
@@ -48,3 +53,37 @@ def spline_expr(times, values, t: ca.SX) -> ca.SX:
         f = piece if f is None else ca.if_else(t >= t0, piece, f)
     return ca.if_else(t >= sp.x[-1], float(values[-1]), f)
 
+
+
+def callable_value(mech: Mechanism, name: str, t: float, c: float, cd: float) -> float:
+    """The load ``name``'s Python law at time t (s), its joint's coordinate c and rate cd:
+    one finite number (N or N m), else a ModelError naming the load."""
+    val = mech.loads[name].law.func(float(t), float(c), float(cd))
+    ok = isinstance(val, int | float | np.number) and not isinstance(val, bool | np.bool_) \
+        or (isinstance(val, np.ndarray) and val.shape == ())
+    if not ok or not math.isfinite(float(val)):
+        shown = reprlib.repr(val)
+        raise ModelError(Problem(f"loads.{name}", "law", f"the Python callable returned "
+                                 f"{shown} at t = {t:.9g} s (coordinate {c:.9g}, rate "
+                                 f"{cd:.9g}); expected one finite number, the load in N "
+                                 "or N m"), mech.source)
+    return float(val)
+
+
+def callable_jacobian(model: Any, t: float, q: np.ndarray, v: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """d(generalized load forces of ``model``'s callable laws)/dq and /dv, (nq, nq) each:
+    the laws' own derivatives (central differences), which CasADi cannot see."""
+    nq = model.nq
+    dq, dv = np.zeros((nq, nq)), np.zeros((nq, nq))
+    c, cd, c_q, cd_q = model._rates_jac(q, v)
+    for name, k in model.callables:
+        hc, hd = 1e-6 * (1 + abs(c[k])), 1e-6 * (1 + abs(cd[k]))
+        f_c = (callable_value(model.mech, name, t, c[k] + hc, cd[k])
+               - callable_value(model.mech, name, t, c[k] - hc, cd[k])) / (2 * hc)
+        f_d = (callable_value(model.mech, name, t, c[k], cd[k] + hd)
+               - callable_value(model.mech, name, t, c[k], cd[k] - hd)) / (2 * hd)
+        g = c_q[k]  # the load's direction in generalized coordinates
+        dq += np.outer(g, f_c * c_q[k] + f_d * cd_q[k])
+        dv += np.outer(g, f_d * c_q[k])
+    return dq, dv

@@ -15,18 +15,16 @@ residual and one Jacobian.
 
 from __future__ import annotations
 
-import math
-import reprlib
+from collections import Counter
 from collections.abc import Sequence
 from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 
-from ..core.errors import ModelError, Problem
 from ..description.mechanism import Mechanism
 from ..description.params import param_value, symbolic
-from . import build, kkt, reaction
+from . import build, kkt, laws, reaction
 from .build import Constraints, JointCoords, Row  # noqa: F401 (model.Row, as before)
 from .codegen import Buffered, compile_functions
 from .unknowns import Unknowns, ground_pins
@@ -146,9 +144,10 @@ class Model:
         # IDA's unknowns: a body pinned to the ground by its angle alone (not with load laws
         # given as Python callables, whose solver Jacobian terms are in centroid
         # coordinates)
+        rows = Counter(r.name for r in self.rows if r.kind == "joint")
         pins = {b: j for b, j in ground_pins(mech).items()
                 if pinned_angles and not self.callables and j not in self.reacting
-                and sum(r == Row("joint", j) for r in self.rows) == 2}
+                and rows[j] == 2}
         #: what IDA integrates (:class:`~cmm_dae.equations.unknowns.Unknowns`)
         self.ida = Unknowns(self, pins, q, v, t, p, phi, Qf, free, Mdiag)
         self.compiled = False
@@ -169,18 +168,29 @@ class Model:
         el_len, el_rate, el_ten = e.el_len, e.el_rate, e.el_ten
         load_val, load_pow = e.load_val, e.load_pow
         dn = ca.densify
-        self.phi_fn = ca.Function("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)])
+        mk = ca.Function  # (F is the residual below: not a name these lambdas may share)
+        # The dense single-state evaluators are built on first use (:meth:`__getattr__`):
+        # a long chain's runs work from Phi_q's nonzeros, and densifying its Phi_q for each
+        # (770 x 771 with 128 loops) took 0.5 of the model's 0.75 s
+        self._lazy = {
+            "phi_fn": lambda: mk("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)]),
+            "coord_fn": lambda: mk("coord", [q, v], [dn(c), dn(cdot), dn(c_q)]),
+            "_rates_jac": lambda: Buffered(mk("rates_jac", [q, v], [
+                dn(c), dn(cdot), dn(c_q), dn(ca.jacobian(cdot, q))])),
+            "kin_fn": lambda: mk("kin", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t), dn(c),
+                                                   dn(c_q)]),
+            "kkt_fn": lambda: mk("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)]),
+            "post_fn": lambda: mk("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)]),
+            #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
+            "event_parts": lambda: Buffered(mk("evparts", [q, v, t, p], [
+                dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)])),
+            "_phi": lambda: Buffered(self.phi_fn), "_coord": lambda: Buffered(self.coord_fn),
+            "_kin": lambda: Buffered(self.kin_fn), "_post": lambda: Buffered(self.post_fn),
+            "_kkt_parts": lambda: Buffered(self.kkt_fn)}
         #: Phi_q's nonzeros only, in CSC order of :attr:`phi_q_pattern` (large mechanisms'
         #: screens: a chain of 32 loops has 2 % of its 194 x 291 entries nonzero)
         self.phi_q_nz_fn = ca.Function("phi_q_nz", [q, t, p],
                                        [ca.vertcat(*Phi_q.nonzeros())])
-        self.coord_fn = ca.Function("coord", [q, v], [dn(c), dn(cdot), dn(c_q)])
-        self._rates_jac = Buffered(ca.Function("rates_jac", [q, v], [dn(c), dn(cdot), dn(c_q),
-                                                                     dn(ca.jacobian(cdot, q))]))
-        self.kin_fn = ca.Function("kin", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t), dn(c),
-                                                     dn(c_q)])
-        self.kkt_fn = ca.Function("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)])
-        self.post_fn = ca.Function("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)])
 
         def col(xs):
             return dn(ca.vertcat(*xs)) if xs else ca.SX(0, 1)
@@ -201,19 +211,11 @@ class Model:
         self.free_fn = ca.Function("free_rows", [p], [dn(free)])
         # single-point evaluations for the step-by-step paths (private: callers use the
         # named methods below)
-        self._phi = Buffered(self.phi_fn)
-        self._coord = Buffered(self.coord_fn)
-        self._kin = Buffered(self.kin_fn)
-        self._kkt_parts = Buffered(self.kkt_fn)
-        self._post = Buffered(self.post_fn)
         self._free = Buffered(self.free_fn)
         #: joint coordinates and rates (q, v) -> (c, cdot); also the symbolic base of
         #: IDA's event functions
         self.cvel_fn = ca.Function("cvel", [q, v], [dn(c), dn(cdot)])
         self._cvel = Buffered(self.cvel_fn)
-        #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
-        self.event_parts = Buffered(ca.Function(
-            "evparts", [q, v, t, p], [dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)]))
         #: the single-state KKT solves (equations.kkt)
         self._kkt = kkt.Solver(self, Phi_q.sparsity())
         #: whether :meth:`kkt` factors the KKT matrix as a sparse one
@@ -238,6 +240,15 @@ class Model:
         #: the symbolic residual (``res_fn`` may be replaced by a compiled one below), which
         #: :mod:`cmm_dae.integrators.csegment` generates C from with ``jac_sparse_fn``
         self.res_sx = self.res_fn
+
+    def __getattr__(self, name: str):
+        # (only for attributes not set: the lazy single-state evaluators of _functions)
+        lazy = self.__dict__.get("_lazy")
+        if lazy is None or name not in lazy:
+            raise AttributeError(f"'Model' object has no attribute '{name}'")
+        value = lazy[name]()
+        setattr(self, name, value)
+        return value
 
     # ------------------------------------------------------------- named interface
     def free_rows(self, p: np.ndarray) -> np.ndarray:
@@ -335,38 +346,14 @@ class Model:
         p = p.copy()
         c, cd = self.joint_rates(q, v)
         for i, (name, k) in enumerate(self.callables):
-            p[self._u0 + i] = self._call(name, t, c[k], cd[k])
+            p[self._u0 + i] = laws.callable_value(self.mech, name, t, c[k], cd[k])
         return p
-
-    def _call(self, name: str, t: float, c: float, cd: float) -> float:
-        val = self.mech.loads[name].law.func(float(t), float(c), float(cd))
-        ok = isinstance(val, int | float | np.number) and not isinstance(val, bool | np.bool_) \
-            or (isinstance(val, np.ndarray) and val.shape == ())
-        if not ok or not math.isfinite(float(val)):
-            shown = reprlib.repr(val)
-            raise ModelError(Problem(f"loads.{name}", "law", f"the Python callable returned "
-                                     f"{shown} at t = {t:.9g} s (coordinate {c:.9g}, rate "
-                                     f"{cd:.9g}); expected one finite number, the load in N "
-                                     "or N m"), self.mech.source)
-        return float(val)
 
     def input_jacobian(self, t: float, q: np.ndarray, v: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
         """d(generalized load forces of the callable laws)/dq and /dv, (nq, nq) each: the
-        term CasADi cannot see (the law's own derivatives, by central differences)."""
-        nq = self.nq
-        dq, dv = np.zeros((nq, nq)), np.zeros((nq, nq))
-        c, cd, c_q, cd_q = self._rates_jac(q, v)
-        for name, k in self.callables:
-            hc, hd = 1e-6 * (1 + abs(c[k])), 1e-6 * (1 + abs(cd[k]))
-            f_c = (self._call(name, t, c[k] + hc, cd[k])
-                   - self._call(name, t, c[k] - hc, cd[k])) / (2 * hc)
-            f_d = (self._call(name, t, c[k], cd[k] + hd)
-                   - self._call(name, t, c[k], cd[k] - hd)) / (2 * hd)
-            g = c_q[k]  # the load's direction in generalized coordinates
-            dq += np.outer(g, f_c * c_q[k] + f_d * cd_q[k])
-            dv += np.outer(g, f_d * c_q[k])
-        return dq, dv
+        term CasADi cannot see (:func:`~.laws.callable_jacobian`)."""
+        return laws.callable_jacobian(self, t, q, v)
 
     def kkt(self, q: np.ndarray, v: np.ndarray, t: float, p: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
