@@ -9,17 +9,20 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Event, EventKind, Side
+from ..equations.kinematics import project_state
 from ..equations.kkt import impact_map
 from .state import (
     HybridState,
     Transition,
+    Trigger,
+    TriggerKind,
     idle_slide,
     impulses,
     joint_acceleration,
     over_constrained,
 )
 
-__all__ = ["held_joints", "slip_free", "stick_or_slip"]
+__all__ = ["held_joints", "resting_slips", "slip_free", "stick_or_slip"]
 
 
 def _direction(force: float) -> int:
@@ -59,6 +62,31 @@ def held_joints(hs: HybridState) -> list[str]:
     release that lets the mechanism move decides them again."""
     return [j for j in hs.model.frictional if j not in hs.locked and j not in hs.slip
             and not idle_slide(hs.model, j, hs.locked)]
+
+
+def resting_slips(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float
+                  ) -> list[Trigger]:
+    """The rate triggers of slipping joints that move against their slip where the next
+    segment starts, at (q, v) projected onto the constraints as that start projects them
+    (:func:`~cmm_dae.equations.kinematics.project_state`): the joints of a one-degree-of-
+    freedom linkage all pass rest together at its turning points, IDA locates the instant
+    on one of them, and the projection of IDA's interpolated state left the others' rates
+    just past zero, where no root finder sees them cross (a free four-bar's pins B, C, D
+    kept their friction pushing them for 0.15 s), where they turn back. Decided at that
+    instant."""
+    model = hs.model
+    if not hs.slip:
+        return []
+    qp, vp = project_state(model, q, v, t, hs.p)
+    _, cd = model.joint_rates(qp, vp)
+    back = [j for j, s in hs.slip.items() if s * cd[model.jidx[j]] < 0.0]
+    if not back:
+        return []
+    # and are turning back (a joint that has just begun to slip from rest, its rate a
+    # round-off zero of either sign, accelerates the way it slips)
+    acc = model.joint_accelerations(qp, vp, model.kkt(qp, vp, t, hs.p)[0], t)
+    return [Trigger(j, Side.NONE, TriggerKind.RATE) for j in back
+            if hs.slip[j] * acc[model.jidx[j]] < 0.0]
 
 
 def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
@@ -113,8 +141,9 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
                                 side=Side.POSITIVE if s > 0 else Side.NEGATIVE, before=before,
                                 after=hs.current(), velocity_before=float(cd[k]),
                                 velocity_after=float(cd[k]),
-                                note="the drivers move this joint through rest: the "
-                                     "friction reverses with its rate"), q, v)
+                                note="its lock would repeat the other constraints here "
+                                     "(the drivers or the linkage move it through rest): "
+                                     "the friction reverses with its rate"), q, v)
     p = hs.params_of(trial, slip=slip)
     v0, imp = v, np.zeros(model.m)
     if cd[k] != 0.0:

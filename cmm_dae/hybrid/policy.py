@@ -28,7 +28,7 @@ from ..equations.kinematics import (
 )
 from ..equations.kkt import impact_map
 from ..equations.model import Model
-from .friction import held_joints, slip_free, stick_or_slip
+from .friction import held_joints, resting_slips, slip_free, stick_or_slip  # noqa: F401
 from .state import (
     ZENO_DT,
     HybridState,

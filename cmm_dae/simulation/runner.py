@@ -217,10 +217,10 @@ def _run(mech: Mechanism, opts: RunOptions, cls: type[Integrator], throw: bool,
                 if seg is not None:
                     seg.groups.append((trig, done, [hs.params[x.event.after] for x in done]))
                 q, v = _apply(done, t, q, v, events, rec, after, integ, opts)
-            # the events may leave a coordinate on a zone's edge, already moving across
-            # it (released from a stop there): decided now, as at the start
+            # the events may leave a coordinate on a zone's edge, already moving across it
+            # (released from a stop there), or joints past rest with the one: decided now
             while end.triggers and (edge := [x for x in ev.zone_edges(hs, q, v)
-                                             if x not in edges]):
+                                             + ev.resting_slips(hs, q, v, t) if x not in edges]):
                 edges.add(edge[0])
                 done = ev.handle(hs, edge[0], q, v, t, integ.policy)
                 if seg is not None:
