@@ -22,7 +22,7 @@ from .state import (
     over_constrained,
 )
 
-__all__ = ["held_joints", "resting_slips", "slip_free", "stick_or_slip"]
+__all__ = ["held_joints", "resting_slips", "settle", "slip_free", "stick_or_slip"]
 
 
 def _direction(force: float) -> int:
@@ -62,6 +62,27 @@ def held_joints(hs: HybridState) -> list[str]:
     release that lets the mechanism move decides them again."""
     return [j for j in hs.model.frictional if j not in hs.locked and j not in hs.slip
             and not idle_slide(hs.model, j, hs.locked)]
+
+
+def settle(hs: HybridState, done: Transition, t: float) -> list[Transition]:
+    """``done`` (a joint's stick or slip at rest) and, where it was a stick that leaves the
+    mechanism no motion at all, the joints still slipping held at rest with it, at that
+    instant: their rates are round-off from here on (IDA met them one by one microseconds
+    later, at rates of 1e-40; the fixed-step algorithm never, so the two logs differed)."""
+    out = [done]
+    if done.event.kind != EventKind.STICK or not hs.slip or not _immobile(hs, done.q, t):
+        return out
+    _, cd = hs.model.joint_rates(done.q, done.v)
+    for joint in sorted(hs.slip):
+        before, rate = hs.current(), float(cd[hs.model.jidx[joint]])
+        hs.slip = {j: s for j, s in hs.slip.items() if j != joint}
+        hs.stick_at.pop(joint, None)
+        out.append(Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
+                                    before=before, after=hs.current(), velocity_before=rate,
+                                    velocity_after=rate,
+                                    note="held at rest by the other joints' locks"),
+                              done.q, done.v))
+    return out
 
 
 def resting_slips(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float

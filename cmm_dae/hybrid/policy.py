@@ -28,7 +28,7 @@ from ..equations.kinematics import (
 )
 from ..equations.kkt import impact_map
 from ..equations.model import Model
-from .friction import held_joints, resting_slips, slip_free, stick_or_slip  # noqa: F401
+from .friction import held_joints, resting_slips, settle, slip_free, stick_or_slip  # noqa: F401
 from .state import (
     ZENO_DT,
     HybridState,
@@ -256,7 +256,7 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
     if tr.kind == TK.GAP:
         return at_limit(hs, q, v, t, tr.joint, tr.side, policy)
     if tr.kind == TK.RATE:
-        return [stick_or_slip(hs, q, v, t, tr.joint)]
+        return settle(hs, stick_or_slip(hs, q, v, t, tr.joint), t)
     force = hs.lock_force(q, v, t, tr.joint)
     if tr.kind == TK.SLIP:
         return _decide_held(hs, [Transition(slip_free(hs, q, v, t, tr.joint, force), q, v)], t)
