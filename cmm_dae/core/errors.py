@@ -44,8 +44,9 @@ STATUS_MESSAGES: dict[Status, str] = {
                     "driver",
     Status.JAM: "a joint comes to rest where neither sticking nor slipping is consistent: "
                 "friction from the reactions would lock the mechanism against its own loads",
-    Status.STALLED: "the run-wide step budget (max_steps) was spent: tiny steps at a grazing "
-                    "contact, a near-singular position or forces too stiff for the tolerances",
+    Status.STALLED: "the run-wide step budget (max_steps) was spent: a fast motion over a "
+                    "long run, or tiny steps at a grazing contact, a near-singular position or "
+                    "forces too stiff for the tolerances",
     Status.MAX_EVENTS: "more events than max_events",
     Status.INTERRUPTED: "interrupted by the user (Ctrl-C)",
     Status.INTEGRATOR: "the integrator could not continue (tolerances too tight or forces "
