@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from iftomm import OUT, _ida_on  # noqa: E402
+from iftomm import OUT, minimal_a02  # noqa: E402
 
 import cmm_dae as cd  # noqa: E402
 from cmm_dae.description import iftomm  # noqa: E402
@@ -30,23 +30,6 @@ from cmm_dae.description import iftomm  # noqa: E402
 RTOLS = (1e-8, 1e-10, 1e-11, 1e-12)
 #: atol = rtol / 100 times these: its last bits
 ATOL_FACTORS = (1.0, 1.0 + 1e-7, 1.0 - 1e-7)
-
-
-def minimal_error(n: int, t_end: float, rtol: float, atol: float) -> float:
-    """The tip's largest error (m) of IDA on A02's one-DOF residual at (rtol, atol)."""
-    inertia = (n + 1) / 3.0 + n
-    weight = ((n + 1) / 2.0 + n) * iftomm.G
-
-    def res(t, y, yp, r):
-        r[0] = yp[0] - y[1]
-        r[1] = yp[1] + weight * np.cos(y[0]) / inertia
-
-    grid = np.linspace(0.0, t_end, int(t_end / 0.01) + 1)
-    y0 = np.array([np.pi / 2, -1.0])
-    sol, _ = _ida_on(res, y0, np.array([-1.0, -weight * np.cos(y0[0]) / inertia]), grid,
-                     rtol, atol=atol)
-    tip = np.column_stack([np.cos(sol.y[:, 0]), np.sin(sol.y[:, 0])])
-    return float(np.max(np.hypot(*(tip - iftomm.a02_reference(n, sol.t)).T)))
 
 
 def energy_changes(res: cd.Result) -> tuple[float, float]:
@@ -83,7 +66,7 @@ def rows(n: int, t_end: float) -> list[dict]:
                             t=float(res.t[-1]), error=err, steps=res.stats.steps,
                             crossings=sum(e.kind == "singular" for e in res.events),
                             across=across, within=within,
-                            minimal=minimal_error(n, t_end, rtol, atol)))
+                            minimal=minimal_a02(n, t_end, rtol, atol)[1]))
             print(_row(out[-1]), flush=True)
     return out
 
