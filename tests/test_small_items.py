@@ -161,8 +161,9 @@ def test_friction_from_the_reaction_settles_alike_on_both_integrators():
     would be redundant: IDA locates that instant and C slips on reversed; the fixed-step
     algorithm meets it a step late, where sticking has no consistent forces, and C slips on
     reversed there too. Once the slider sticks the mechanism cannot move: the pins are
-    held at rest by its lock at that instant, with no friction of their own to reverse. The two agree on
-    the sequence of slips and the stick (but for one direction at the last instant), and
+    held at rest by its lock at that instant, with no friction of their own to reverse. The
+    two agree on the sequence of slips and the stick (but for one direction at the last
+    instant), and
     the fixed-step algorithm's rest state converges on IDA's (first order: dt 1e-3 -> 1e-4
     brings crank A from 3.1e-3 to 3.2e-4 rad of IDA's)."""
     mech = cd.load(ROOT / "tests" / "models" / "free_slider_crank_friction.toml")
