@@ -22,7 +22,8 @@ from .state import (
     over_constrained,
 )
 
-__all__ = ["held_joints", "resting_slips", "settle", "slip_free", "stick_or_slip"]
+__all__ = ["follow_impulse", "held_joints", "resting_slips", "settle", "slip_free",
+           "stick_or_slip"]
 
 
 def _direction(force: float) -> int:
@@ -108,6 +109,16 @@ def resting_slips(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float
     acc = model.joint_accelerations(qp, vp, model.kkt(qp, vp, t, hs.p)[0], t)
     return [Trigger(j, Side.NONE, TriggerKind.RATE) for j in back
             if hs.slip[j] * acc[model.jidx[j]] < 0.0]
+
+
+def follow_impulse(hs: HybridState, q: np.ndarray, v: np.ndarray, v_lock: float) -> None:
+    """After an impact's impulse: a slipping joint that it sent the other way (faster than
+    ``v_lock``) slips that way (the double-folded mechanism's pin D, reversed by the
+    slider's stop, had kept its friction pushing it along for 2 s)."""
+    _, cd = hs.model.joint_rates(q, v)
+    rate = {j: float(cd[hs.model.jidx[j]]) for j in hs.slip}
+    hs.slip = {j: (1 if rate[j] > 0 else -1) if s * rate[j] < -v_lock else s
+               for j, s in hs.slip.items()}
 
 
 def slip_free(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,

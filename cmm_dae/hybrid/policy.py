@@ -1,5 +1,4 @@
-"""The one event policy of both integrators: configurations, crossings, impact map, lock,
-release, jams and the Zeno rule.
+"""The one event policy of both integrators: crossings, impacts, locks, releases, the Zeno rule.
 
 A configuration is the set of locked metamorphic joints (joint -> side). An integrator only
 *detects* a trigger — IDA by locating a root of :func:`event_values`, the fixed-step
@@ -28,7 +27,7 @@ from ..equations.kinematics import (
 )
 from ..equations.kkt import impact_map
 from ..equations.model import Model
-from .friction import held_joints, resting_slips, settle, slip_free, stick_or_slip  # noqa: F401
+from .friction import follow_impulse, held_joints, resting_slips, settle, slip_free, stick_or_slip  # noqa: F401
 from .state import (
     ZENO_DT,
     HybridState,
@@ -271,7 +270,7 @@ def handle(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float,
 
 def _decide_held(hs: HybridState, out: list[Transition], t: float) -> list[Transition]:
     """After a release: the joints the released lock held at rest stick or slip again."""
-    for joint in held_joints(hs):
+    for joint in held_joints(hs):  # (each from the state the one before left)
         out.append(stick_or_slip(hs, out[-1].q, out[-1].v, t, joint))
     return out
 
@@ -342,6 +341,7 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
         hs.bounces.setdefault(joint, []).append(t)
         if joint in hs.slip:  # it slides back the other way
             hs.slip = {**hs.slip, joint: 1 if cdp > 0 else -1}
+    follow_impulse(hs, q, v_plus, policy.v_lock)
     lost = float(T_minus - 0.5 * np.sum(model.mass * v_plus**2))
     kind = EventKind.BOUNCE if bounce else EventKind.LANDING if model.joints[joint].lands \
         else EventKind.LOCK if abs(cdm) <= policy.v_lock else EventKind.LIMIT
