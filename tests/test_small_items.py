@@ -277,12 +277,12 @@ def test_joints_passing_rest_together_all_turn_back(name, t_end, t_rest):
 def test_an_impact_that_reverses_a_slipping_pin_reverses_its_friction():
     """The shipped double-folded mechanism with pin friction: the slider's stop at 2.68 s
     sends pin D the other way, and its friction kept pushing it along until 4.88 s (up to
-    2.9e-3 W over 2,200 samples); its slip now follows the impulse. Friction does no
-    positive work after the first 10 ms (the start's first 2 ms still do, 2.6e-5 W at most),
+    2.9e-3 W over 2,200 samples); its slip now follows the impulse. At the start, D's
+    slip was decided before the slider's stick and pushed it the first 2 ms; it is
+    decided again once all joints at rest are. Friction does no positive work (1e-9 W),
     and the energy audit closes within 1e-7 J."""
     res = cd.simulate(cd.load(cd.example("double_folded_pin_friction")), 10.0, output_dt=1e-3)
-    later = res.t > 0.01
     for j in ("C", "D", "E"):
         power = res.joint(j).friction * res.joint(j).velocity
-        assert np.max(power[later]) <= 1e-9, j
+        assert np.max(power) <= 1e-9, j
     assert np.max(np.abs(res.energy().residual)) < 1e-7

@@ -94,14 +94,15 @@ def resting_slips(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float
     freedom linkage all pass rest together at its turning points, IDA locates the instant
     on one of them, and the projection of IDA's interpolated state left the others' rates
     just past zero, where no root finder sees them cross (a free four-bar's pins B, C, D
-    kept their friction pushing them for 0.15 s), where they turn back. Decided at that
-    instant."""
+    kept their friction pushing them for 0.15 s), where they turn back; and at the start,
+    a joint at rest whose slip was decided before the others' and now accelerates against
+    it. Decided at that instant."""
     model = hs.model
     if not hs.slip:
         return []
     qp, vp = project_state(model, q, v, t, hs.p)
     _, cd = model.joint_rates(qp, vp)
-    back = [j for j, s in hs.slip.items() if s * cd[model.jidx[j]] < 0.0]
+    back = [j for j, s in hs.slip.items() if s * cd[model.jidx[j]] <= 0.0]
     if not back:
         return []
     # and are turning back (a joint that has just begun to slip from rest, its rate a

@@ -194,7 +194,7 @@ def start_triggers(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigge
         into = cd[k] < -still if tr.side == "lower" else cd[k] > still
         if into and abs(c[k] - L) <= stop_tolerance(L):
             out.append(tr)
-    return out + zone_edges(hs, q, v)
+    return out + zone_edges(hs, q, v) + resting_slips(hs, q, v, 0.0)
 
 
 def zone_edges(hs: HybridState, q: np.ndarray, v: np.ndarray) -> list[Trigger]:
