@@ -286,3 +286,30 @@ def test_an_impact_that_reverses_a_slipping_pin_reverses_its_friction():
         power = res.joint(j).friction * res.joint(j).velocity
         assert np.max(power) <= 1e-9, j
     assert np.max(np.abs(res.energy().residual)) < 1e-7
+
+
+def test_a_sample_whose_reaction_friction_fails_keeps_the_run(monkeypatch):
+    """Post-processing solves friction from the reaction sample by sample; one sample it
+    cannot solve (here made to fail) no longer loses the run to a raw LinAlgError: the
+    Result stands, that sample's accelerations and forces are NaN, and a warning names
+    the first time."""
+    from cmm_dae.equations import model as model_module
+
+    mech = cd.load(cd.example("double_folded_pin_friction"))
+    orig = model_module.Model.kkt
+    calls: list = []
+
+    def flaky(self, q, v, t, p):
+        if t > 1.0 and not calls and self.reacting and np.any(p != 0.0):
+            calls.append(t)
+            raise np.linalg.LinAlgError("made to fail")
+        return orig(self, q, v, t, p)
+
+    res_ok = cd.simulate(mech, 2.0, compiled=False)
+    monkeypatch.setattr(model_module.Model, "kkt", flaky)
+    with pytest.warns(RuntimeWarning, match=r"could not be solved at 1 sample\(s\), the first "
+                                             r"at t = 1\.\d+ s"):
+        res = cd.simulate(mech, 2.0, compiled=False)
+    bad = np.isnan(res.data["a"]).any(axis=1)
+    assert res.success and bad.sum() == 1 and res.t[bad][0] > 1.0
+    assert np.array_equal(res.data["q"], res_ok.data["q"])

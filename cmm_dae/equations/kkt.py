@@ -18,6 +18,7 @@ corrected by :func:`cmm_dae.equations.reaction.solve`.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -230,8 +231,17 @@ def batch(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray
     a, lam = _linear_batch(model, t, q, v, P)
     if model.reacting:
         slots = [model.slip_slot(j) for j in model.reacting]
+        failed = []
         for i in np.flatnonzero(np.any(P[:, slots] != 0.0, axis=1)):
-            a[i], lam[i], _ = model.kkt(q[i], v[i], float(t[i]), P[i])
+            try:
+                a[i], lam[i], _ = model.kkt(q[i], v[i], float(t[i]), P[i])
+            except np.linalg.LinAlgError:  # the run's states stand; this one's forces not
+                a[i], lam[i] = np.nan, np.nan
+                failed.append(float(t[i]))
+        if failed:
+            warnings.warn(f"friction from the reaction could not be solved at {len(failed)} "
+                          f"sample(s), the first at t = {failed[0]:.9g} s: their "
+                          "accelerations and forces are NaN", RuntimeWarning, stacklevel=2)
     return a, lam
 
 
