@@ -234,8 +234,8 @@ def test_the_order_one_trap_loosens_the_velocities_at_most_1000x(monkeypatch):
     the run so far kept."""
     from cmm_dae.integrators import suppress
 
-    def stuck_after_five(self, trapped=lambda: None) -> bool:
-        if self.steps() >= 5:
+    def stuck_after_five(self, nst: int, trapped=lambda: None) -> bool:
+        if nst >= 5:
             trapped()
             return True
         return False

@@ -54,7 +54,6 @@ def spline_expr(times, values, t: ca.SX) -> ca.SX:
     return ca.if_else(t >= sp.x[-1], float(values[-1]), f)
 
 
-
 def callable_value(mech: Mechanism, name: str, t: float, c: float, cd: float) -> float:
     """The load ``name``'s Python law at time t (s), its joint's coordinate c and rate cd:
     one finite number (N or N m), else a ModelError naming the load."""

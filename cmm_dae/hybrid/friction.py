@@ -75,15 +75,23 @@ def settle(hs: HybridState, done: Transition, t: float) -> list[Transition]:
         return out
     _, cd = hs.model.joint_rates(done.q, done.v)
     for joint in sorted(hs.slip):
-        before, rate = hs.current(), float(cd[hs.model.jidx[joint]])
-        hs.slip = {j: s for j, s in hs.slip.items() if j != joint}
-        hs.stick_at.pop(joint, None)
-        out.append(Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
-                                    before=before, after=hs.current(), velocity_before=rate,
-                                    velocity_after=rate,
-                                    note="held at rest by the other joints' locks"),
-                              done.q, done.v))
+        out.append(_hold(hs, done.q, done.v, t, joint, float(cd[hs.model.jidx[joint]])))
     return out
+
+
+def _hold(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
+          rate: float) -> Transition:
+    """``joint`` held at rest by the other joints' locks (:func:`_immobile`): no lock of
+    its own, which would repeat theirs, no friction of its own to reverse at every
+    round-off sign of its rate (a storm of slip events at rates of 1e-42), until a release
+    lets it move (:func:`held_joints`)."""
+    before = hs.current()
+    hs.slip = {j: s for j, s in hs.slip.items() if j != joint}
+    hs.stick_at.pop(joint, None)
+    return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
+                            before=before, after=hs.current(), velocity_before=rate,
+                            velocity_after=rate, note="held at rest by the other joints' locks"),
+                      q, v)
 
 
 def resting_slips(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float
@@ -145,18 +153,8 @@ def stick_or_slip(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint
     trial = {**hs.locked, joint: "stick"}
     hs.stick_at[joint] = float(c[k])
     if over_constrained(hs, trial, q, t):
-        if _immobile(hs, q, t):
-            # the other joints' locks hold the mechanism at rest (a slider-crank whose
-            # slider stuck): no lock of its own, which would repeat theirs, no friction of its
-            # own to reverse at every round-off sign of its rate (a storm of slip events
-            # at rates of 1e-42), until a release lets it move (:func:`held_joints`)
-            hs.stick_at.pop(joint, None)
-            hs.slip = slip
-            return Transition(Event(t=t, kind=EventKind.STICK, joint=joint, side=Side.STICK,
-                                    before=before, after=hs.current(),
-                                    velocity_before=float(cd[k]),
-                                    velocity_after=float(cd[k]),
-                                    note="held at rest by the other joints' locks"), q, v)
+        if _immobile(hs, q, t):  # (the others' locks hold the mechanism: its slider stuck)
+            return _hold(hs, q, v, t, joint, float(cd[k]))
         # the drivers (and locks) fix this joint's motion: it cannot stick of its own (a
         # press's slide at its dead centre, whose rate only passes zero); it goes on
         # slipping the way the drivers move it, the friction reversed with its rate

@@ -27,7 +27,7 @@ from ..equations.kinematics import (
 )
 from ..equations.kkt import impact_map
 from ..equations.model import Model
-from .friction import follow_impulse, held_joints, resting_slips, settle, slip_free, stick_or_slip  # noqa: F401
+from .friction import follow_impulse, held_joints, resting_slips, settle, slip_free, stick_or_slip
 from .state import (
     ZENO_DT,
     HybridState,

@@ -76,7 +76,7 @@ class IdaCallbacks:
             self.crawled = self.in_place > IN_PLACE_STEPS
         if nst == SLOW_STEPS and t - self.t_start < self.h_natural:
             self.crawled = True
-        self.t_last, self.n_steps = t, nst
+        self.t_last = t
         self.stalled = not self.crawled and nst > self.step_budget
         if self.opts.progress is not None:
             self.opts.progress.update(t)

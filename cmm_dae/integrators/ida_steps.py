@@ -222,7 +222,7 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             x = solver.step(t_end if nst else first_tout(float(tspan[0]), t_end),
                             method="onestep", tstop=t_end)
             nst += 1
-            if x.status == 0 and (after_step(x.t, trap.steps()) or trap(trapped)):
+            if x.status == 0 and (after_step(x.t, n := trap.steps()) or trap(n, trapped)):
                 x = SimpleNamespace(t=x.t, y=x.y, status=2, message="", i_events=None,
                                     nfev=x.nfev, njev=x.njev)
             if x.status >= 0:

@@ -81,10 +81,9 @@ class TrapCheck:
         self.lib.IDAGetNumSteps(self.mem, ctypes.byref(n))
         return n.value
 
-    def __call__(self, trapped=lambda: None) -> bool:
-        """Whether IDA, now at its step :meth:`steps` of the segment, is trapped (then
-        ``trapped()`` is told)."""
-        nst = self.steps()
+    def __call__(self, nst: int, trapped=lambda: None) -> bool:
+        """Whether IDA, now at its step ``nst`` of the segment (:meth:`steps`), is
+        trapped (then ``trapped()`` is told)."""
         if nst - self.nst < TRAP_WINDOW:
             return False
         nef, k = ctypes.c_long(), ctypes.c_int()
