@@ -22,6 +22,8 @@ from .joint_checks import (  # noqa: F401 (the names the description may use)
     joint_problems,
 )
 from .parts import STOP_TOL
+from .spatial import SPACES
+from .spatial import problems as spatial_problems
 
 MOTIONS = ("constant_speed", "polynomial", "harmonic", "table")
 
@@ -77,7 +79,13 @@ def validate(m: Any) -> list[Problem]:
     """All semantic problems of a mechanism (empty list when it is sound): the checks of
     each table, and every non-finite number (:func:`non_finite`) they did not report."""
     out: list[Problem] = []
-    if not all(_finite(g) for g in m.gravity):
+    space = getattr(m, "space", "planar")
+    if space not in SPACES:
+        out.append(Problem("mechanism", "space", f"expected one of {', '.join(SPACES)}, "
+                           f"got {space!r}"))
+    if space == "spatial":
+        out += spatial_problems(m)
+    elif not all(_finite(g) for g in m.gravity) or len(m.gravity) != 2:
         out.append(Problem("mechanism", "gravity", f"expected two finite numbers, got {m.gravity}"))
     if not m.bodies:
         out.append(Problem("bodies", "", "a mechanism needs at least one body"))
@@ -90,7 +98,7 @@ def validate(m: Any) -> list[Problem]:
         if not isinstance(name, str) or not name or "." in name:
             out.append(Problem("ground", f"points.{name}", "a point name must be a non-empty "
                                "word without '.'"))
-    for name, b in m.bodies.items():
+    for name, b in m.bodies.items() if space != "spatial" else ():
         t = f"bodies.{name}"
         if name == GROUND:
             out.append(Problem(t, "", "'ground' is reserved for the frame"))
@@ -104,8 +112,8 @@ def validate(m: Any) -> list[Problem]:
                                f"got {b.inertia}"))
     used_bodies: set[str] = set()
     for name, j in m.joints.items():
-        t = f"joints.{name}"
-        out += joint_problems(m, t, j)
+        if space != "spatial":
+            out += joint_problems(m, f"joints.{name}", j)
         used_bodies.update((j.first_body, j.second_body))
     for name in m.bodies:
         if name not in used_bodies:
@@ -219,8 +227,10 @@ def _check_load(m: Any, t: str, ld: Any) -> list[Problem]:
         if ld.frame not in FRAMES:
             out.append(Problem(t, "frame", f"expected one of {', '.join(FRAMES)}, "
                                f"got {ld.frame!r}"))
-    elif ld.direction is not None:
-        out.append(Problem(t, "direction", "only a force at a body point has a direction"))
+    elif ld.direction is not None and (ld.joint is not None or m.space != "spatial"):
+        out.append(Problem(t, "direction", "only a force at a body point has a direction"
+                           + " (or a moment on a body of a spatial mechanism)"
+                           * (m.space == "spatial")))
     out.extend(_check_law(t, ld.law, ld.target))
     z = ld.zone
     if z is not None:

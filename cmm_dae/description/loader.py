@@ -7,9 +7,7 @@ the file, the table and the key. Nothing in a file is evaluated as Python.
 
 from __future__ import annotations
 
-import difflib
 import math
-import reprlib
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -37,9 +35,12 @@ from .mechanism import (
     Zone,
     validate,
 )
+from .reader import Reader as _Reader
+from .reader import short as _short
 from .schema import SPEC, default, keys_of
+from .spatial import SPATIAL_TYPES
+from .spatial_reader import GRAVITY, read_axes, read_body, read_joint_axes
 
-_REQUIRED = object()
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
 MAX_FILE_BYTES = 16 * 2**20
 
@@ -53,91 +54,6 @@ LOAD_KEYS = tuple(k for k in keys_of("loads") if k not in
                   {x for ks in LAW_KEYS.values() for x in ks})
 ELEMENT_KEYS = keys_of("elements")
 DRIVER_KEYS = {m: ("motion",) + ks for m, ks in schema.MOTION_KEYS.items()}
-
-
-class _Reader:
-    """Typed access to a TOML table that records problems instead of raising."""
-
-    def __init__(self) -> None:
-        self.problems: list[Problem] = []
-
-    def bad(self, table: str, key: str, msg: str) -> None:
-        self.problems.append(Problem(table, key, msg))
-
-    def keys(self, table: str, d: Any, allowed: tuple[str, ...]) -> dict:
-        if not isinstance(d, dict):
-            self.bad(table, "", f"expected a table, got {type(d).__name__} {_short(d)}")
-            return {}
-        for k in d:
-            if k not in allowed:
-                close = difflib.get_close_matches(k, allowed, n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else \
-                    f" (allowed: {', '.join(allowed)})"
-                self.bad(table, k, f"unknown key{hint}")
-        return d
-
-    def num(self, table: str, d: dict, key: str, default: Any = _REQUIRED) -> float:
-        if key not in d:
-            if default is _REQUIRED:
-                self.bad(table, key, "missing (expected a number)")
-                return math.nan
-            return default
-        return self._num(table, key, d[key])
-
-    def _num(self, table: str, key: str, v: Any) -> float:
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            self.bad(table, key, f"expected a number, got {type(v).__name__} {_short(v)}")
-            return math.nan
-        if not math.isfinite(v):
-            self.bad(table, key, f"expected a finite number, got {v}")
-            return math.nan
-        return float(v)
-
-    def vec(self, table: str, d: dict, key: str, n: int | None, default: Any = _REQUIRED
-            ) -> tuple[float, ...]:
-        if key not in d:
-            if default is _REQUIRED:
-                self.bad(table, key, f"missing (expected a list of {n or 'some'} numbers)")
-                return tuple([math.nan] * (n or 0))
-            return default
-        v = d[key]
-        if not isinstance(v, list) or (n is not None and len(v) != n):
-            self.bad(table, key, f"expected a list of {n or 'some'} numbers, got {_short(v)}")
-            return tuple([math.nan] * (n or 0))
-        out = []
-        for i, x in enumerate(v):
-            out.append(self._num(table, f"{key}[{i}]", x))
-        return tuple(out)
-
-    def string(self, table: str, d: dict, key: str, default: Any = _REQUIRED) -> str:
-        if key not in d:
-            if default is _REQUIRED:
-                self.bad(table, key, "missing (expected a string)")
-                return ""
-            return default
-        v = d[key]
-        if not isinstance(v, str):
-            self.bad(table, key, f"expected a string, got {type(v).__name__} {_short(v)}")
-            return ""
-        return v
-
-    def choice(self, table: str, d: dict, key: str, options: tuple[str, ...]) -> str | None:
-        """A string that must be one of ``options`` (None, with the problem noted, else)."""
-        v = self.string(table, d, key)
-        if v in options:
-            return v
-        if v:
-            close = difflib.get_close_matches(v, options, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            self.bad(table, key, f"expected one of {', '.join(options)}, got {v!r}{hint}")
-        return None
-
-    def sub(self, table: str, d: dict, key: str) -> dict:
-        v = d.get(key, {})
-        if not isinstance(v, dict):
-            self.bad(table, key, f"expected a table, got {type(v).__name__} {_short(v)}")
-            return {}
-        return v
 
 
 def load(path: str | Path) -> Mechanism:
@@ -199,29 +115,29 @@ def from_dict(data: dict, *, source: str | None = None) -> Mechanism:
                                  "numbers, short lists and tables)"), source) from None
 
 
-def _short(v: Any) -> str:
-    """repr of a value, cut short (a huge or deeply nested value must not flood a message)."""
-    return reprlib.repr(v)
-
-
 def _from_dict(data: dict, source: str | None) -> Mechanism:
     r = _Reader()
     r.keys("", data, TOP_KEYS)
     mech = r.keys("mechanism", r.sub("", data, "mechanism"), MECH_KEYS)
     name = r.string("mechanism", mech, "name", default=Path(source).stem if source else "mechanism")
-    gravity = r.vec("mechanism", mech, "gravity", 2, default=default("mechanism", "gravity"))
+    space = r.string("mechanism", mech, "space", default="planar")  # (checked by validate)
+    spatial, dim = space == "spatial", 3 if space == "spatial" else 2
+    gravity = r.vec("mechanism", mech, "gravity", dim, default=GRAVITY if spatial
+                    else default("mechanism", "gravity"))
 
     ground_t = r.keys("ground", r.sub("", data, "ground"), keys_of("ground"))
     ground = {}
     for k, v in r.sub("ground", ground_t, "points").items():
-        ground[k] = r.vec("ground.points", {k: v}, k, 2)
+        ground[k] = r.vec("ground.points", {k: v}, k, dim)
+    gaxes = read_axes(r, "ground", ground_t) if spatial else _planar(r, "ground", ground_t)
 
-    bodies = [_body(r, k, v) for k, v in r.sub("", data, "bodies").items()]
+    bodies = [read_body(r, k, v) if spatial else _body(r, k, v)
+              for k, v in r.sub("", data, "bodies").items()]
     jt = r.sub("", data, "joints")
-    joints = [_joint(r, k, v) for k, v in jt.items() if not is_gear(v)]
+    joints = [_joint(r, k, v, spatial) for k, v in jt.items() if not is_gear(v)]
     gears = [read_gear(r, k, v) for k, v in jt.items() if is_gear(v)]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
-    loads = [_load(r, k, v) for k, v in r.sub("", data, "loads").items()]
+    loads = [_load(r, k, v, dim) for k, v in r.sub("", data, "loads").items()]
     elements = [_element(r, k, v) for k, v in r.sub("", data, "elements").items()]
 
     ini = r.keys("initial", r.sub("", data, "initial"), keys_of("initial"))
@@ -246,7 +162,7 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
         # without validating, then report only what the reader did not already say.
         m = Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
                       initial=Initial(ij, iv, eq), gravity=gravity, source=source, loads=loads,
-                      elements=elements, gears=gears, check=False)
+                      elements=elements, gears=gears, space=space, axes=gaxes, check=False)
         seen = {(p.table, p.key.split("[")[0]) for p in problems}
         problems += [p for p in validate(m) if (p.table, p.key) not in seen
                      and (p.table, p.key.split(".")[0]) not in seen]
@@ -257,9 +173,18 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     return m
 
 
+def _planar(r: _Reader, t: str, d: dict, keys: tuple[str, ...] = ("axes",)) -> dict:
+    """Keys of the spatial format in a planar table: each is a problem."""
+    for k in keys:
+        if k in d:
+            r.bad(t, k, "spatial mechanisms only (set [mechanism] space = \"spatial\")")
+    return {}
+
+
 def _body(r: _Reader, name: str, d: Any) -> Body:
     t = f"bodies.{name}"
     d = r.keys(t, d, BODY_KEYS)
+    _planar(r, t, d)
     mass = r.num(t, d, "mass")
     inertia = r.num(t, d, "inertia")
     centroid = r.vec(t, d, "centroid", 2, default=default("bodies", "centroid"))
@@ -282,16 +207,23 @@ def _body(r: _Reader, name: str, d: Any) -> Body:
     return Body(name, mass, inertia, centroid, points, guess)
 
 
-def _joint(r: _Reader, name: str, d: Any) -> Joint:
+def _joint(r: _Reader, name: str, d: Any, spatial: bool = False) -> Joint:
     t = f"joints.{name}"
     d = r.keys(t, d, JOINT_KEYS)
     jtype = r.string(t, d, "type")
-    if jtype and jtype not in JOINT_TYPES:
-        r.bad(t, "type", f"expected one of {', '.join(map(repr, JOINT_TYPES))}, got {jtype!r}")
+    types = SPATIAL_TYPES if spatial else JOINT_TYPES
+    if jtype and jtype not in types:
+        r.bad(t, "type", f"expected one of {', '.join(map(repr, types))}, got {jtype!r}")
     first, second = _connects(r, t, d)
     curve, side, unilateral = contact_keys(r, t, d, jtype)
-    axis = r.vec(t, d, "axis", 2, default=default("joints", "axis"))
-    angle = r.num(t, d, "angle", default=default("joints", "angle"))
+    axes = reference = None
+    if spatial:
+        axes, reference = read_joint_axes(r, t, d, jtype)
+        axis, angle = default("joints", "axis"), 0.0
+    else:
+        _planar(r, t, d, ("axes", "reference"))
+        axis = r.vec(t, d, "axis", 2, default=default("joints", "axis"))
+        angle = r.num(t, d, "angle", default=default("joints", "angle"))
     limits = None
     if "limits" in d:
         lt = r.keys(f"{t}.limits", r.sub(t, d, "limits"), keys_of("joints", "limits"))
@@ -321,7 +253,7 @@ def _joint(r: _Reader, name: str, d: Any) -> Joint:
                               for k in ("static", "kinetic", "mu_static", "mu_kinetic",
                                         "radius")))
     return Joint(name, jtype, first, second, axis, angle, limits, restitution, spring, damper,
-                 friction, curve, side, unilateral)
+                 friction, curve, side, unilateral, axes, reference)
 
 
 def _connects(r: _Reader, t: str, d: dict) -> tuple[str, str]:
@@ -353,7 +285,7 @@ def _law(r: _Reader, t: str, d: dict) -> Law:
     return Law(kind, stall=r.num(t, d, "stall"), no_load_speed=r.num(t, d, "no_load_speed"))
 
 
-def _load(r: _Reader, name: str, d: Any) -> Load:
+def _load(r: _Reader, name: str, d: Any, dim: int = 2) -> Load:
     t = f"loads.{name}"
     if not isinstance(d, dict):
         r.bad(t, "", f"expected a table, got {_short(d)}")
@@ -366,7 +298,7 @@ def _load(r: _Reader, name: str, d: Any) -> Load:
                     r.num(f"{t}.zone", zt, "lower", None), r.num(f"{t}.zone", zt, "upper", None))
     return Load(name, law, joint=r.string(t, d, "joint", None), body=r.string(t, d, "body", None),
                 point=r.string(t, d, "point", None),
-                direction=r.vec(t, d, "direction", 2, default=None),
+                direction=r.vec(t, d, "direction", dim, default=None),
                 frame=r.string(t, d, "frame", default("loads", "frame")), zone=zone)
 
 

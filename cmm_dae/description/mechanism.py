@@ -17,6 +17,7 @@ from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
 from .curves import spline
 from .laws import Driver, Law, Zone
 from .parts import Curve, Damper, Friction, Gear, Limits, Spring
+from .records import Initial, Load, Vec2, Vec3, _floats, _frozen
 
 __all__ = [
     "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Curve", "Damper",
@@ -25,12 +26,10 @@ __all__ = [
 ]
 
 
-Vec2 = tuple[float, float]
-
-
-def _frozen(d: dict | None) -> MappingProxyType:
-    return MappingProxyType(dict(d or {}))
-
+#: joint types of spatial mechanisms only, and each spatial type's constraint rows
+SPATIAL_ONLY = ("spherical", "universal", "cylindrical")
+SPATIAL_ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4,
+                "spherical": 3}
 
 @dataclass(frozen=True)
 class Body:
@@ -49,24 +48,39 @@ class Body:
     points : dict[str, (float, float)]
         Named points in the body frame, m.
     guess : (float, float, float) or None
-        Pose guess (x m, y m, theta rad) of the body frame for assembly.
+        Pose guess (x m, y m, theta rad) of the body frame for assembly; in a spatial
+        mechanism six numbers: the frame's origin (m) and its rotation vector (axis times
+        angle, rad).
+    axes : dict[str, (float, float, float)]
+        Spatial mechanisms: named directions in the body frame (normalised on use), which
+        joints name as ``"body.axis"``.
+
+    In a spatial mechanism (``Mechanism.space == "spatial"``) points and the centroid have
+    three coordinates and ``inertia`` is the centroidal tensor in the body frame: three
+    principal moments ``(Ixx, Iyy, Izz)`` or six numbers ``(Ixx, Iyy, Izz, Ixy, Ixz, Iyz)``
+    (kg m^2, products of inertia as the tensor's off-diagonal entries).
     """
 
     name: str
     mass: float
-    inertia: float
-    centroid: Vec2 = (0.0, 0.0)
+    inertia: float | tuple[float, ...]
+    centroid: Vec2 | Vec3 = (0.0, 0.0)
     points: MappingProxyType = field(default_factory=lambda: _frozen({}))
-    guess: tuple[float, float, float] | None = None
+    guess: tuple[float, ...] | None = None
+    axes: MappingProxyType = field(default_factory=lambda: _frozen({}))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", _frozen(
-            {k: (float(v[0]), float(v[1])) for k, v in dict(self.points).items()}))
-        object.__setattr__(self, "centroid", (float(self.centroid[0]), float(self.centroid[1])))
+            {k: _floats(v) for k, v in dict(self.points).items()}))
+        object.__setattr__(self, "centroid", _floats(self.centroid))
+        object.__setattr__(self, "axes", _frozen(
+            {k: _floats(v) for k, v in dict(self.axes).items()}))
+        if isinstance(self.inertia, list | tuple):
+            object.__setattr__(self, "inertia", _floats(self.inertia))
 
     def __reduce__(self):  # MappingProxyType does not pickle: rebuild from plain dicts
         return (Body, (self.name, self.mass, self.inertia, self.centroid, dict(self.points),
-                       self.guess))
+                       self.guess, dict(self.axes)))
 
     @classmethod
     def with_inertia_about(cls, name: str, mass: float, inertia: float, about: Vec2,
@@ -132,6 +146,15 @@ class Joint(_TwoPoints):
         from the curve on its side (the gap, m, >= 0). A bilateral contact (a pin in a
         slot) keeps to the curve; its coordinate is the arc length (m), ``limits`` its
         ends (an open spline's own ends by default).
+    axes : (str, str) or None
+        Spatial mechanisms: one named axis of each body, ``("body.axis", "body.axis")``:
+        held aligned (revolute, prismatic, cylindrical) or, for a universal joint, the
+        two arms held perpendicular.
+    reference : (str, str) or None
+        Spatial revolute, prismatic and cylindrical joints: one named direction of each
+        body across the axis; the angle about the first axis from the first to the second
+        is the joint's coordinate (rad, in (-pi, pi]; a prismatic joint holds it at 0).
+        Default: the bodies' axes named ``x``.
     """
 
     name: str
@@ -148,15 +171,25 @@ class Joint(_TwoPoints):
     curve: Curve | None = None
     side: str = "outside"
     unilateral: bool = False
+    axes: tuple[str, str] | None = None
+    reference: tuple[str, str] | None = None
 
     @property
     def unit(self) -> str:
-        return "rad" if self.type == "revolute" else "m"
+        return "rad" if self.type in ("revolute", "cylindrical") else "m"
+
+    @property
+    def spatial(self) -> bool:
+        """A joint of a spatial mechanism (it names its bodies' axes)."""
+        return self.axes is not None or self.type in SPATIAL_ONLY
 
     @property
     def rows(self) -> int:
-        """Constraint rows the joint holds with no stop locked: 2 for a lower pair, 1 for
-        a bilateral contact, 0 for a unilateral one."""
+        """Constraint rows the joint holds with no stop locked: 2 for a planar lower pair,
+        1 for a bilateral contact, 0 for a unilateral one; in space 5 for a revolute or
+        prismatic joint, 4 for a cylindrical or universal one, 3 for a spherical one."""
+        if self.spatial:
+            return SPATIAL_ROWS[self.type]
         if self.type != "contact":
             return 2
         return 0 if self.unilateral else 1
@@ -184,34 +217,6 @@ class Joint(_TwoPoints):
 
 
 @dataclass(frozen=True)
-class Load:
-    """An applied load: a scalar :class:`Law` times what it acts on.
-
-    On a joint coordinate (``joint``): a torque (revolute, N m) or force (prismatic, N),
-    positive along the coordinate on the second body, negative on the first. At a body
-    point (``body`` and ``point``): a force ``law * direction`` (N; ``direction``
-    normalised, in the ``"global"`` or the ``"body"`` frame). On a body without a point: a
-    pure moment (N m, counter-clockwise positive). ``zone`` limits where it acts.
-    """
-
-    name: str
-    law: Law
-    joint: str | None = None
-    body: str | None = None
-    point: str | None = None
-    direction: Vec2 | None = None
-    frame: str = "global"
-    zone: Zone | None = None
-
-    @property
-    def target(self) -> str:
-        """``"joint"``, ``"point"`` or ``"moment"``."""
-        if self.joint is not None:
-            return "joint"
-        return "point" if self.point is not None else "moment"
-
-
-@dataclass(frozen=True)
 class Element(_TwoPoints):
     """Spring-damper-actuator between two points of any two bodies (ground included).
 
@@ -230,31 +235,9 @@ class Element(_TwoPoints):
 
 
 @dataclass(frozen=True)
-class Initial:
-    """Known joint coordinates and joint-coordinate rates at t = 0 (rad, m, rad/s, m/s).
-
-    ``equilibrium``: dotted model paths (``"joints.D.spring.rest"``) solved so that the
-    coordinates named in ``joints`` start with zero acceleration (as many paths as those
-    coordinates), or ``"position"`` to solve those coordinates themselves; () for none.
-    """
-
-    joints: MappingProxyType = field(default_factory=lambda: _frozen({}))
-    velocities: MappingProxyType = field(default_factory=lambda: _frozen({}))
-    equilibrium: tuple[str, ...] | str = ()
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "joints", _frozen(self.joints))
-        object.__setattr__(self, "velocities", _frozen(self.velocities))
-        if not isinstance(self.equilibrium, str):
-            object.__setattr__(self, "equilibrium", tuple(self.equilibrium))
-
-    def __reduce__(self):
-        return (Initial, (dict(self.joints), dict(self.velocities), self.equilibrium))
-
-
-@dataclass(frozen=True)
 class Mechanism:
-    """A planar mechanism: ground points, bodies, joints, drivers, initial state.
+    """A planar or spatial mechanism (``space``: ``"planar"`` or ``"spatial"``): ground
+    points (and, in space, ground ``axes``), bodies, joints, drivers, initial state.
 
     Built from lists or dicts; validated on construction (every problem at once,
     one :class:`ModelError`) unless ``check=False``.
@@ -271,6 +254,8 @@ class Mechanism:
     loads: MappingProxyType = field(default_factory=lambda: _frozen({}))
     elements: MappingProxyType = field(default_factory=lambda: _frozen({}))
     gears: MappingProxyType = field(default_factory=lambda: _frozen({}))
+    space: str = "planar"
+    axes: MappingProxyType = field(default_factory=lambda: _frozen({}))
     check: InitVar[bool] = True
 
     def __post_init__(self, check: bool) -> None:
@@ -300,8 +285,10 @@ class Mechanism:
         object.__setattr__(self, "elements", as_map(self.elements, "name", "elements"))
         object.__setattr__(self, "gears", as_map(self.gears, "name", "gears"))
         object.__setattr__(self, "ground", _frozen(
-            {k: (float(v[0]), float(v[1])) for k, v in dict(self.ground).items()}))
-        object.__setattr__(self, "gravity", (float(self.gravity[0]), float(self.gravity[1])))
+            {k: _floats(v) for k, v in dict(self.ground).items()}))
+        object.__setattr__(self, "axes", _frozen(
+            {k: _floats(v) for k, v in dict(self.axes).items()}))
+        object.__setattr__(self, "gravity", _floats(self.gravity))
         problems = dup + validate(self) if check else []
         if problems:
             raise ModelError(problems, self.source)
@@ -309,14 +296,16 @@ class Mechanism:
     def __reduce__(self):
         return (_rebuild, (self.name, dict(self.bodies), dict(self.joints), dict(self.ground),
                            dict(self.drivers), self.initial, self.gravity, self.source,
-                           dict(self.loads), dict(self.elements), dict(self.gears)))
+                           dict(self.loads), dict(self.elements), dict(self.gears),
+                           self.space, dict(self.axes)))
 
     def replace(self, **changes) -> Mechanism:
         """A copy with some fields replaced (``bodies=``, ``loads=``, ...), validated."""
         kw = dict(name=self.name, bodies=dict(self.bodies), joints=dict(self.joints),
                   ground=dict(self.ground), drivers=dict(self.drivers), initial=self.initial,
                   gravity=self.gravity, source=self.source, loads=dict(self.loads),
-                  elements=dict(self.elements), gears=dict(self.gears))
+                  elements=dict(self.elements), gears=dict(self.gears), space=self.space,
+                  axes=dict(self.axes))
         kw.update(changes)
         return Mechanism(**kw)
 
@@ -340,12 +329,22 @@ class Mechanism:
         """Joints with dry friction, in file order."""
         return [n for n, j in self.joints.items() if j.friction is not None]
 
-    def point(self, ref: str) -> Vec2:
+    def point(self, ref: str) -> Vec2 | Vec3:
         """Local coordinates (m) of ``"body.point"`` in its body frame."""
         body, pt = ref.split(".", 1)
         if body == GROUND:
             return self.ground[pt]
         return self.bodies[body].points[pt]
+
+    def axis(self, ref: str) -> Vec3:
+        """The direction ``"body.axis"`` in its body frame, as given (spatial)."""
+        body, ax = ref.split(".", 1)
+        return self.axes[ax] if body == GROUND else self.bodies[body].axes[ax]
+
+    @property
+    def spatial(self) -> bool:
+        """Whether the mechanism is spatial (``space == "spatial"``)."""
+        return self.space == "spatial"
 
 
 def require_mechanism(obj: object, caller: str) -> None:
@@ -359,10 +358,11 @@ def require_mechanism(obj: object, caller: str) -> None:
 
 
 def _rebuild(name, bodies, joints, ground, drivers, initial, gravity, source, loads=None,
-             elements=None, gears=None) -> Mechanism:
+             elements=None, gears=None, space="planar", axes=None) -> Mechanism:
     """Unpickling: the description was validated when it was first built."""
     return Mechanism(name=name, bodies=bodies, joints=joints, ground=ground, drivers=drivers,
                      initial=initial, gravity=gravity, source=source, loads=loads or {},
-                     elements=elements or {}, gears=gears or {}, check=False)
+                     elements=elements or {}, gears=gears or {}, space=space,
+                     axes=axes or {}, check=False)
 
 

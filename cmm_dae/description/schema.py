@@ -1,8 +1,7 @@
 """The model-file format, written once.
 
 Every table and key of a mechanism TOML file is described here with its type, unit,
-default and meaning. Three things are generated from this one description, so they
-cannot disagree:
+default and meaning. Three things are generated from it, so they cannot disagree:
 
 * the loader's key checks (:mod:`cmm_dae.description.loader` takes its allowed keys
   and defaults from :data:`SPEC`),
@@ -10,8 +9,7 @@ cannot disagree:
   editors and TOML language servers read,
 * the model-file reference of the documentation (:func:`reference_markdown`).
 
-The semantic checks that a schema cannot say (a body named by a joint exists, limits are
-ordered, a driven joint has no limits, ...) stay in :mod:`cmm_dae.description.checks`.
+The semantic checks a schema cannot say stay in :mod:`cmm_dae.description.checks`.
 """
 
 from __future__ import annotations
@@ -20,80 +18,60 @@ import json
 from typing import Any
 
 from .checks import CURVES, FRAMES, JOINT_TYPES, LAWS, MOTIONS, SIDES
-from .spec import REQUIRED, Key, Table  # noqa: F401 (schema.Key and schema.Table, as before)
-
-_COORD = "rad (revolute) or m (prismatic, contact)"
-_RATE = "rad/s or m/s"
-
-#: Extra keys of each law (loads) and each motion (drivers).
-LAW_KEYS: dict[str, tuple[str, ...]] = {
-    "constant": ("value",),
-    "polynomial": ("coefficients",),
-    "harmonic": ("mean", "amplitude", "frequency", "phase"),
-    "table": ("times", "values"),
-    "motor": ("stall", "no_load_speed"),
-}
-MOTION_KEYS: dict[str, tuple[str, ...]] = {
-    "constant_speed": ("initial", "speed"),
-    "polynomial": ("coefficients",),
-    "harmonic": ("initial", "amplitude", "frequency", "phase"),
-    "table": ("times", "values"),
-}
-
-_LAW_VALUES: dict[str, Key] = {
-    "value": Key("number", "value of a constant law", "N, N m (the load's unit)"),
-    "coefficients": Key("numbers", "c0, c1, ...: value = sum c_k t^k", "unit / s^k"),
-    "mean": Key("number", "harmonic law: mean value", "the load's unit", default=0.0),
-    "amplitude": Key("number", "harmonic law: amplitude", "the load's unit"),
-    "frequency": Key("number", "harmonic law: frequency", "Hz", minimum=0.0),
-    "phase": Key("number", "harmonic law: phase", "rad", default=0.0),
-    "times": Key("numbers", "table law: sample times, strictly increasing from 0 (the value "
-                 "is held after the last time)", "s"),
-    "values": Key("numbers", "table law: values at `times`, joined by a C2 cubic spline",
-                  "the load's unit"),
-    "stall": Key("number", "motor law: value at zero rate; value = stall (1 - rate / "
-                 "no_load_speed)", "N m or N"),
-    "no_load_speed": Key("number", "motor law: rate at which the value reaches zero", _RATE),
-}
-
-_DRIVER_VALUES: dict[str, Key] = {
-    "initial": Key("number", "coordinate at t = 0 (constant_speed, harmonic)", _COORD),
-    "speed": Key("number", "constant_speed: coordinate = initial + speed t", _RATE),
-    "coefficients": Key("numbers", "polynomial: coordinate = sum c_k t^k", f"{_COORD} / s^k"),
-    "amplitude": Key("number", "harmonic: coordinate = initial + amplitude sin(2 pi f t + "
-                     "phase)", _COORD),
-    "frequency": Key("number", "harmonic: frequency f", "Hz", minimum=0.0),
-    "phase": Key("number", "harmonic: phase", "rad", default=0.0),
-    "times": Key("numbers", "table: sample times, strictly increasing from 0", "s"),
-    "values": Key("numbers", "table: coordinates at `times`, joined by a C2 cubic spline "
-                  "with clamped ends", _COORD),
-}
+from .spatial import SPACES, SPATIAL_TYPES
+from .spec import (  # noqa: F401 (schema.Key, Table, LAW_KEYS, ... as before)
+    _COORD,
+    _DRIVER_VALUES,
+    _LAW_VALUES,
+    _RATE,
+    LAW_KEYS,
+    MOTION_KEYS,
+    REQUIRED,
+    Key,
+    Table,
+)
 
 #: The whole file, table by table (the order is the order of the reference).
 SPEC: dict[str, Table] = {
-    "mechanism": Table("Name and gravity.", {
+    "mechanism": Table("Name, space and gravity.", {
         "name": Key("string", "name shown in reports", default="the file's stem"),
-        "gravity": Key("vector2", "gravitational acceleration, global frame", "m/s^2",
-                       default=[0.0, -9.81]),
+        "space": Key("choice", "planar (x, y; every body turns about z) or spatial (x, y, "
+                     "z: points, centroids, gravity and directions get three coordinates, "
+                     "bodies an inertia tensor and named axes)", choices=SPACES,
+                     default="planar"),
+        "gravity": Key("vector23", "gravitational acceleration, global frame ([0, 0, -9.81] "
+                       "by default in space)", "m/s^2", default=[0.0, -9.81]),
     }, example='[mechanism]\nname = "offset slider-crank"\ngravity = [0.0, -9.81]'),
     "ground": Table("Fixed points, in global coordinates.", {
-        "points": Key("map", "point name -> [x, y]", "m", of="vector2", default={}),
+        "points": Key("map", "point name -> [x, y] ([x, y, z] in space)", "m",
+                      of="vector23", default={}),
+        "axes": Key("map", "spatial only: direction name -> [x, y, z] (normalised), named by "
+                    "joints as `ground.NAME`", of="vector3", default={}),
     }, example='[ground.points]\nA = [0.0, 0.0]\nrail = [0.0, 0.01]'),
     "bodies": Table("One table per moving rigid body; `ground` is reserved.", {
         "mass": Key("number", "mass", "kg", minimum=0.0),
-        "inertia": Key("number", "moment of inertia about the centroid (or about "
+        "inertia": Key("inertia", "moment of inertia about the centroid (or about "
                        "`inertia_about`); 0 is a point mass, whose rotation its joints must "
-                       "fix", "kg m^2", minimum=0.0),
+                       "fix. In space the centroidal tensor in body axes: [Ixx, Iyy, Izz] "
+                       "(principal) or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], positive definite",
+                       "kg m^2", minimum=0.0),
         "inertia_about": Key("string", "name of one of the body's points about which "
                              "`inertia` is given (the parallel-axis theorem is applied)",
                              default=None),
-        "centroid": Key("vector2", "centre of mass in the body frame", "m",
+        "centroid": Key("vector23", "centre of mass in the body frame", "m",
                         default=[0.0, 0.0]),
-        "points": Key("map", "point name -> [x, y] in the body frame (the frame the "
-                      "body's pose is the position and angle of)", "m", of="vector2",
-                      default={}),
-        "guess": Key("vector3", "pose guess [x, y, theta] for the assembly at t = 0",
-                     "m, m, rad", default=None),
+        "points": Key("map", "point name -> [x, y] ([x, y, z] in space) in the body frame "
+                      "(the frame the body's pose is the position and angle of)", "m",
+                      of="vector23", default={}),
+        "axes": Key("map", "spatial only: direction name -> [x, y, z] in the body frame "
+                    "(normalised), named by joints as `BODY.NAME`", of="vector3",
+                    default={}),
+        "guess": Key("guess", "pose guess [x, y, theta] (m, m, rad) for the assembly; in "
+                     "space { position, rotation, velocity, angular_velocity }: the frame "
+                     "origin's position (m) and velocity (m/s), its rotation vector (axis "
+                     "times angle, rad) and angular velocity (rad/s, global axes), where the "
+                     "motion no [initial] coordinate names starts (made consistent)",
+                     default=None),
     }, named=True, example='[bodies.crank]\nmass = 0.1\ninertia = 2.0e-5\n'
        'centroid = [0.025, 0.0]\npoints = { A = [0.0, 0.0], B = [0.05, 0.0] }'),
     "joints": Table("One table per joint between two bodies (or a body and the ground).", {
@@ -101,8 +79,11 @@ SPEC: dict[str, Table] = {
                     "displacement of the second point from the first along `axis`; contact: "
                     "the second point on a `curve` of the first body (a higher pair), "
                     "coordinate its arc length (bilateral) or its gap (unilateral); gear: "
-                    "two joints' coordinates in a fixed `ratio` (gears, rack and pinion)",
-                    choices=JOINT_TYPES + ("gear",)),
+                    "two joints' coordinates in a fixed `ratio` (gears, rack and pinion). "
+                    "In space: revolute (coordinate: the angle about `axis` from the first "
+                    "`reference` to the second, in (-pi, pi]), prismatic (displacement "
+                    "along the first body's `axis`), spherical, universal (no coordinate)",
+                    choices=JOINT_TYPES + ("gear",) + SPATIAL_TYPES[2:]),
         "connects": Key("strings2", "[\"body.point\", \"body.point\"]: the first and the "
                         "second body and their points (`ground.X` for a ground point; a "
                         "contact's curve passes through the first point); a gear pair: "
@@ -116,8 +97,14 @@ SPEC: dict[str, Table] = {
                               "rad", minimum=0.0, default=0.3490658503988659),
         "offset": Key("number", "gear only: the second joint's coordinate where the first's "
                       "is 0", _COORD, default=0.0),
-        "axis": Key("vector2", "prismatic only: sliding direction in the first body's frame",
-                    default=[1.0, 0.0]),
+        "axis": Key("axis", "planar prismatic: sliding direction [x, y] in the first body's "
+                    "frame; spatial revolute and prismatic: [\"BODY.AXIS\", \"BODY.AXIS\"], "
+                    "one named axis of each body, held aligned", default=[1.0, 0.0]),
+        "reference": Key("strings2", "spatial revolute and prismatic: one named direction "
+                         "of each body across the axis; the coordinate's zero (default: the "
+                         "bodies' axes `x`)", default=None),
+        "axes": Key("strings2", "spatial universal joint: its two arms, one named axis of "
+                    "each body, held perpendicular", default=None),
         "angle": Key("number", "prismatic only: the relative angle theta_second - "
                      "theta_first the joint holds", "rad", default=0.0),
         "curve": Key("table", "contact only: the first body's curve, in its frame through the "
@@ -203,8 +190,8 @@ SPEC: dict[str, Table] = {
         "body": Key("string", "load on this body (at `point`, or a pure moment, CCW +, "
                     "without one)", default=None),
         "point": Key("string", "the body point the force acts at", default=None),
-        "direction": Key("vector2", "force direction (normalised), in `frame`",
-                         default=None),
+        "direction": Key("vector23", "force direction (normalised), in `frame`; in space "
+                         "also a moment's axis", default=None),
         "frame": Key("choice", "frame of `direction`", choices=FRAMES, default="global"),
         "law": Key("choice", "the law of the value", choices=LAWS),
         **_LAW_VALUES,
@@ -273,6 +260,19 @@ def _json(k: Key) -> dict:
     elif k.kind in ("vector2", "vector3"):
         n = int(k.kind[-1])
         s = {"type": "array", "items": num, "minItems": n, "maxItems": n}
+    elif k.kind == "vector23":
+        s = {"type": "array", "items": num, "minItems": 2, "maxItems": 3}
+    elif k.kind == "inertia":
+        s = {"oneOf": [{"type": "number", "minimum": 0.0},
+                       {"type": "array", "items": num, "minItems": 3, "maxItems": 3},
+                       {"type": "array", "items": num, "minItems": 6, "maxItems": 6}]}
+    elif k.kind == "axis":
+        s = {"oneOf": [_json(Key("vector2", "")), _json(Key("strings2", ""))]}
+    elif k.kind == "guess":
+        s = {"oneOf": [_json(Key("vector3", "")), {
+            "type": "object", "additionalProperties": False,
+            "properties": {k: _json(Key("vector3", "")) for k in (
+                "position", "rotation", "velocity", "angular_velocity")}}]}
     elif k.kind == "numbers":
         s = {"type": "array", "items": num}
     elif k.kind == "points":
@@ -338,7 +338,8 @@ def json_schema() -> dict:
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": "https://cmm-dae.example/schema/model.json",
         "title": "cmm_dae mechanism model file",
-        "description": "A planar constrained metamorphic mechanism (SI units throughout).",
+        "description": "A planar or spatial constrained metamorphic mechanism (SI units "
+                       "throughout).",
         "type": "object",
         "properties": {name: _table_json(t) for name, t in SPEC.items()},
         "required": ["bodies", "joints"],
@@ -353,11 +354,15 @@ def json_text() -> str:
 
 def _type_text(k: Key) -> str:
     return {"number": "number", "string": "string", "vector2": "[x, y]",
-            "vector3": "[x, y, theta]", "boolean": "true \\| false",
+            "vector3": "[x, y, z]", "boolean": "true \\| false",
+            "vector23": "[x, y] or [x, y, z]", "inertia": "number, or 3 or 6 numbers",
+            "axis": "[x, y] or two strings", "guess": "[x, y, theta] or inline table",
             "numbers": "list of numbers",
             "pair": "two strings", "strings2": "two strings", "points": "list of [x, y]",
             "paths": "\"position\" or list of strings",
-            "table": "inline table", "map": f"table of name = {k.of.replace('vector2', '[x, y]')}",
+            "table": "inline table",
+            "map": "table of name = " + {"vector2": "[x, y]", "vector3": "[x, y, z]",
+                                         "vector23": "[x, y] or [x, y, z]"}.get(k.of, k.of),
             "choice": " \\| ".join(f"`{c}`" for c in k.choices)}[k.kind]
 
 

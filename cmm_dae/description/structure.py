@@ -321,20 +321,25 @@ def configuration_label(st: Structure | None, locked: dict[str, str],
     return ", ".join(parts) if parts else "non-collision"
 
 
-def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET
+def labeller(mech: Mechanism, *, budget: int = SEARCH_BUDGET, mobility: int | None = None
              ) -> Callable[[dict[str, str]], tuple[str, int]]:
     """A function giving (label, mobility) of a configuration from its locked joints.
 
     The structure analysis runs on the first label that needs it (a geometric lock), with
-    a bounded search, so labels never cost more than a small fixed budget."""
+    a bounded search, so labels never cost more than a small fixed budget. ``mobility``:
+    the unlocked mechanism's, where the caller has it from the constraint Jacobian's rank
+    (a spatial mechanism's, whose Assur groups are not searched); else counted from the
+    joints' rows."""
     force = force_constraint_joints(mech)
     # a unilateral contact holds no row until it lands (a lock, as a stop's)
-    mobility = 3 * len(mech.bodies) - sum(j.rows for j in mech.joints.values()) \
-        - len(mech.gears)
+    if mobility is None:
+        mobility = 3 * len(mech.bodies) - sum(j.rows for j in mech.joints.values()) \
+            - len(mech.gears)
     cache: list[Structure] = []
 
     def label(locked: dict[str, str]) -> tuple[str, int]:
-        if not cache and any(force.get(j) != s and s != "stick" for j, s in locked.items()):
+        if not cache and not mech.spatial and any(force.get(j) != s and s != "stick"
+                                                  for j, s in locked.items()):
             cache.append(structure(mech, budget=budget))
         return configuration_label(cache[0] if cache else None, locked, force), \
             mobility - len(locked)

@@ -6,7 +6,6 @@ calls them in this order and keeps what they build; each sets the model attribut
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import casadi as ca
@@ -14,9 +13,10 @@ import numpy as np
 
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND
-from . import reaction
+from . import reaction, spatial
 from .contact import contact_gap_arc
-from .laws import driver_expr, law_expr
+from .laws import driver_expr
+from .loading import body_loads, rot
 from .reaction import reacting
 
 __all__ = ["SLIDE", "Constraints", "Forces", "Frame", "JointCoords", "Row", "applied_forces",
@@ -34,11 +34,6 @@ class Row:
 
     kind: str
     name: str
-
-
-def _rot(th):
-    c, s = ca.cos(th), ca.sin(th)
-    return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
 
 
 
@@ -92,10 +87,17 @@ def names(mdl, mech) -> None:
     #: frictional joints whose levels grow with their reaction (equations.reaction)
     mdl.reacting = [of.get(n, n) for n in reacting(mech)]
     nb = len(mdl.body_names)
-    mdl.nq = 3 * nb
-    mdl.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
-    for i, b in enumerate(mech.bodies.values()):
-        mdl.mass[3 * i + 2] = b.inertia
+    #: 2 or 3: the coordinates of a point (planar or spatial)
+    mdl.dim = 3 if mech.spatial else 2
+    #: coordinates of a body: (x, y, theta) in the plane, natural coordinates in space
+    mdl.nqb = spatial.NQ if mech.spatial else 3
+    mdl.nq = mdl.nqb * nb
+    if mech.spatial:
+        mdl.mass = np.array(spatial.mass(mech), float)
+    else:
+        mdl.mass = np.repeat([b.mass for b in mech.bodies.values()], 3)
+        for i, b in enumerate(mech.bodies.values()):
+            mdl.mass[3 * i + 2] = b.inertia
     mdl.bidx = {n: i for i, n in enumerate(mdl.body_names)}
     #: loads that act in a zone only, in the order of their switches in ``p``
     mdl.zoned = [n for n, ld in mech.loads.items() if ld.zone is not None]
@@ -119,19 +121,30 @@ class Frame:
         self.t = ca.SX.sym("t")
         self.p = ca.SX.sym("p", n_params)
         self._mdl, self._smech = mdl, smech
+        #: a spatial mechanism's geometry (equations.spatial), else None
+        self.geo = spatial.Geometry(mdl, smech, self.q) if mdl.mech.spatial else None
+
+    def mass(self) -> ca.SX:
+        """The mass matrix's diagonal (nq,), from the (possibly symbolic) mechanism."""
+        if self.geo is not None:
+            return ca.vertcat(*spatial.mass(self._smech))
+        return ca.vertcat(*[x for b in self._smech.bodies.values()
+                            for x in (b.mass, b.mass, b.inertia)])
 
     def angle(self, body: str):
         return 0.0 if body == GROUND else self.q[3 * self._mdl.bidx[body] + 2]
 
     def point(self, ref: str):
         """Global position of ``"body.point"`` (CasADi)."""
+        if self.geo is not None:
+            return self.geo.point(ref)
         body, _ = ref.split(".", 1)
         lx, ly = self._smech.point(ref)
         if body == GROUND:
             return ca.vertcat(lx, ly)
         q, i = self.q, self._mdl.bidx[body]
         cx, cy = self._mdl.mech.bodies[body].centroid
-        return q[3 * i:3 * i + 2] + _rot(q[3 * i + 2]) @ ca.vertcat(lx - cx, ly - cy)
+        return q[3 * i:3 * i + 2] + rot(q[3 * i + 2]) @ ca.vertcat(lx - cx, ly - cy)
 
 
 def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
@@ -147,7 +160,17 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
     arcs = {}  # the unilateral contacts' arc lengths (their slides' coordinates)
     rows: list[ca.SX] = []
     mdl.rows: list[Row] = []
+    geo, turns = fr.geo, {}  # (turns: a spatial revolute joint's sine and cosine)
+    for b in mech.bodies if geo is not None else ():
+        rows += spatial.body_rows(geo, b)
+        mdl.rows += [Row("body", b)] * 6
     for name, j in mech.joints.items():
+        if geo is not None:
+            cj, jrows, turns[name] = spatial.joint_rows(geo, smech.joints[name], mech)
+            coords.append(cj)
+            rows += jrows
+            mdl.rows += [Row("joint", name)] * len(jrows)
+            continue
         d = point(j.second) - point(j.first)
         dth = angle(j.second_body) - angle(j.first_body)
         if j.type == "revolute":
@@ -155,7 +178,7 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
             jrows = [d[0], d[1]]
         elif j.type == "prismatic":
             u = np.array(j.axis, float) / np.hypot(*j.axis)
-            ua = _rot(angle(j.first_body)) @ ca.DM(u)
+            ua = rot(angle(j.first_body)) @ ca.DM(u)
             na = ca.vertcat(-ua[1], ua[0])
             coords.append(ca.dot(ua, d))
             jrows = [dth - smech.joints[name].angle, ca.dot(na, d)]
@@ -175,7 +198,11 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
         rows.append(c[jidx[gr.second]] - gr.ratio * c[jidx[gr.first]] - gr.offset)
         mdl.rows.append(Row("gear", name))
     for name, d in smech.drivers.items():
-        rows.append(c[jidx[name]] - driver_expr(d, t))
+        if turns.get(name) is not None:  # at the angle f: sin(theta - f) = 0
+            f = driver_expr(d, t)
+            rows.append(turns[name][0] * ca.cos(f) - turns[name][1] * ca.sin(f))
+        else:
+            rows.append(c[jidx[name]] - driver_expr(d, t))
         mdl.rows.append(Row("driver", name))
     n_base = len(rows)
     for k, name in enumerate(mdl.locks):
@@ -237,8 +264,8 @@ def applied_forces(mdl, fr: Frame, c, c_q, cdot, lam) -> Forces:
     Qf = ca.SX.zeros(nq)
     g = smech.gravity
     for i, b in enumerate(smech.bodies.values()):
-        Qf[3 * i] += b.mass * g[0]
-        Qf[3 * i + 1] += b.mass * g[1]
+        for k in range(mdl.dim):
+            Qf[mdl.nqb * i + k] += b.mass * g[k]
     for name, j in smech.joints.items():
         k = jidx[name]
         gen = 0.0
@@ -270,7 +297,7 @@ def applied_forces(mdl, fr: Frame, c, c_q, cdot, lam) -> Forces:
         grows = reaction.growth(mdl, name, lam, "kinetic", mdl.sjoints[name].friction)
         Qr -= c_q[jidx[name], :].T * (grows * p[2 * nl + nz + f])
 
-    Qf, load_val, load_pow = _loads(mdl, fr, c_q, cdot, Qf)
+    Qf, load_val, load_pow = body_loads(mdl, fr, c_q, cdot, Qf)
     # Force elements between two points: tension pulls the points together.
     mdl.element_names = list(mech.elements)
     el_len, el_rate, el_ten = [], [], []
@@ -289,7 +316,7 @@ def applied_forces(mdl, fr: Frame, c, c_q, cdot, lam) -> Forces:
     ref_pts = []
     for j in mech.joints.values():
         ref_pts.append(point(j.second))
-    P = ca.horzcat(*ref_pts) if ref_pts else ca.SX(2, 0)
+    P = ca.horzcat(*ref_pts) if ref_pts else ca.SX(mdl.dim, 0)
 
     return Forces(Qf, Qr, load_val, load_pow, el_len, el_rate, el_ten, P)
 
@@ -321,51 +348,3 @@ def powers(mdl, fr: Frame, lam, Phi_t, cdot, f: Forces):
     powers = ca.vertcat(ca.dot(lam, Phi_t) if m else ca.SX(0), sum(load_pow, ca.SX(0)),
                         diss, fric)
     return powers
-
-
-def _loads(mdl, fr: Frame, c_q, cdot, Qf) -> tuple[ca.SX, list, list]:
-    """``Qf`` with the applied loads added (a law times a joint direction, a point force or
-    a body moment), and their values and powers. Sets ``mdl.load_names`` and
-    ``zone_info``."""
-    mech, jidx, q, v, t, p = mdl.mech, mdl.jidx, fr.q, fr.v, fr.t, fr.p
-    point = fr.point
-    nl = len(mdl.locks)
-    mdl.load_names = list(mech.loads)
-    mdl.zone_info: dict[str, tuple[int, float, float]] = {}
-    load_val, load_pow = [], []
-    for name, ld in mech.loads.items():
-        k = jidx[ld.joint] if ld.joint is not None else None
-        if ld.law.func is not None:
-            val = p[mdl._u0 + [n for n, _ in mdl.callables].index(name)]
-        else:
-            val = law_expr(ld.law, t, cdot[k] if k is not None else None)
-        if ld.zone is not None:
-            zj = jidx[ld.zone.joint if ld.zone.joint is not None else ld.joint]
-            mdl.zone_info[name] = (zj, -math.inf if ld.zone.lower is None
-                                    else ld.zone.lower,
-                                    math.inf if ld.zone.upper is None else ld.zone.upper)
-            val = val * p[2 * nl + mdl.zoned.index(name)]
-        if k is not None:
-            Qf += c_q[k, :].T * val
-            power = val * cdot[k]
-        else:
-            i = mdl.bidx[ld.body]
-            om = v[3 * i + 2]
-            if ld.point is None:
-                Qf[3 * i + 2] += val
-                power = val * om
-            else:
-                dvec = np.array(ld.direction, float) / math.hypot(*ld.direction)
-                dirn = ca.DM(dvec) if ld.frame == "global" else \
-                    _rot(q[3 * i + 2]) @ ca.DM(dvec)
-                F = dirn * val
-                r = point(f"{ld.body}.{ld.point}") - q[3 * i:3 * i + 2]
-                Qf[3 * i] += F[0]
-                Qf[3 * i + 1] += F[1]
-                Qf[3 * i + 2] += r[0] * F[1] - r[1] * F[0]
-                vP = v[3 * i:3 * i + 2] + om * ca.vertcat(-r[1], r[0])
-                power = ca.dot(F, vP)
-        load_val.append(val)
-        load_pow.append(power)
-
-    return Qf, load_val, load_pow

@@ -103,10 +103,7 @@ class Model:
         load_val, load_pow = forces.load_val, forces.load_pow
         el_len, el_rate, el_ten = forces.el_len, forces.el_rate, forces.el_ten
 
-        mass_sx = []
-        for b in smech.bodies.values():
-            mass_sx += [b.mass, b.mass, b.inertia]
-        Mdiag = ca.vertcat(*mass_sx)
+        Mdiag = fr.mass()
         # Stabilized index-2 (GGL) residual with y = [q, v, lambda, mu].
         mu = ca.SX.sym("mu", m)
         y = ca.vertcat(q, v, lam, mu)
@@ -309,6 +306,12 @@ class Model:
     def slip_slot(self, joint: str) -> int:
         """Index in ``p`` of a frictional joint's slip direction (+1, -1, 0)."""
         return 2 * len(self.locks) + len(self.zoned) + self.frictional.index(joint)
+
+    @property
+    def mobility(self) -> int:
+        """Degrees of freedom with no stop locked: coordinates less the body, joint and gear
+        rows in the equations (the redundant ones were left out)."""
+        return self.nq - sum(r.kind in ("body", "joint", "gear") for r in self.rows)
 
     def rows_of(self, kind: str, name: str) -> list[int]:
         """Indices of the rows of one joint, driver or lock."""

@@ -36,10 +36,13 @@ def _all_rows_jacobian(model):
 def expressions(model, lam_all: ca.SX) -> list[ca.SX]:
     """(jforce (2 nj,), jtorque (nj,), gforce (2 ng,), effort (nd,)) as CasADi
     expressions of the model's symbols ``q``, ``p``, ``theta`` and the multipliers
-    ``lam_all`` of every row (``len(model.all_rows)``)."""
+    ``lam_all`` of every row (``len(model.all_rows)``); in space jforce and jtorque are
+    (3 nj,) each."""
     sy = model.sym
     q, P = sy["q"], sy["P"]
     J = _all_rows_jacobian(model)
+    if model.mech.spatial:
+        return _spatial(model, q, P, J, lam_all)
     fx, fy, tq = [], [], []
     for k, (name, j) in enumerate(model.mech.joints.items()):
         rows = model.all_rows_of("joint", name) + model.all_rows_of("lock", name)
@@ -68,6 +71,27 @@ def expressions(model, lam_all: ca.SX) -> list[ca.SX]:
     effort = [-lam_all[model.all_rows_of("driver", n)[0]] for n in model.driver_names]
     force = [x for pair in zip(fx, fy, strict=True) for x in pair]
     return [ca.vertcat(*xs) if xs else ca.SX(0, 1) for xs in (force, tq, gforce, effort)]
+
+
+def _spatial(model, q, P, J, lam_all) -> list[ca.SX]:
+    """:func:`expressions` of a spatial mechanism: (jforce (3 nj,), jtorque (3 nj,),
+    gforce (0,), effort (nd,)). A body's share of the rows' generalized force is its force
+    on the centroid's three coordinates and, on the axes e_k, ``G_k`` whose moment about the
+    centroid is ``sum_k e_k x G_k`` (a virtual rotation moves e_k by dtheta x e_k)."""
+    force, torque = [], []
+    for k, (name, j) in enumerate(model.mech.joints.items()):
+        rows = model.all_rows_of("joint", name) + model.all_rows_of("lock", name)
+        G = -(J[rows, :].T @ lam_all[rows]) if rows else ca.SX.zeros(model.nq)
+        second = j.second_body != GROUND
+        o = model.nqb * model.bidx[j.second_body if second else j.first_body]
+        F = G[o:o + 3]
+        Mc = sum((ca.cross(q[o + 3 + 3 * i:o + 6 + 3 * i], G[o + 3 + 3 * i:o + 6 + 3 * i])
+                  for i in range(3)), ca.SX.zeros(3))
+        s = 1.0 if second else -1.0  # on the ground: minus the first body's
+        force.append(s * F)
+        torque.append(s * (Mc - ca.cross(P[:, k] - q[o:o + 3], F)))
+    effort = [-lam_all[model.all_rows_of("driver", n)[0]] for n in model.driver_names]
+    return [ca.vertcat(*xs) if xs else ca.SX(0, 1) for xs in (force, torque, [], effort)]
 
 
 def function(model) -> ca.Function:

@@ -46,7 +46,7 @@ def ground_pins(mech: Mechanism) -> dict[str, str]:
     driven crank by its angle took 9% more steps at rtol 1e-8 and stalled (1e-6 s steps)
     at 1e-12."""
     pins: dict[str, str] = {}
-    for name, j in mech.joints.items():
+    for name, j in mech.joints.items() if not mech.spatial else ():
         if j.type != "revolute" or (j.first_body == GROUND) == (j.second_body == GROUND) \
                 or name in mech.drivers:
             continue

@@ -17,6 +17,8 @@ from ..core.records import Event, EventKind
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model
+from ..equations.spatial import initial_guess as spatial_guess
+from ..equations.spatial import velocity_guess
 from .policy import resting_rate, stick_or_slip
 from .state import HybridState, idle_slide
 from .zones import initial_zones
@@ -28,6 +30,8 @@ CLOSE_TOL = 1e-10
 def initial_guess(model: Model) -> np.ndarray:
     """Centroid coordinates from the bodies' frame-pose guesses (zeros where none)."""
     q = np.zeros(model.nq)
+    if model.mech.spatial:
+        return spatial_guess(model)
     for i, b in enumerate(model.mech.bodies.values()):
         x, y, th = b.guess if b.guess is not None else (0.0, 0.0, 0.0)
         c, s = np.cos(th), np.sin(th)
@@ -89,7 +93,8 @@ def _solve_positions(model: Model, t: float, p: np.ndarray, known: dict[str, flo
             f"name {dof} non-driven joint coordinate(s); it names {len(names)}"
             + (f" ({', '.join(names)})" if names else "")), model.mech.source)
 
-    if n_eq < model.nq:
+    # (in space the free motion no coordinate names starts from the bodies' guessed poses)
+    if n_eq < model.nq and not model.mech.spatial:
         raise wrong_count(model.nq - len(act))
 
     def fun(q):
@@ -100,11 +105,12 @@ def _solve_positions(model: Model, t: float, p: np.ndarray, known: dict[str, flo
 
     q = np.array(q_guess, float)
     r, J = fun(q)
-    if np.max(np.abs(r), initial=0.0) > 1e-6:
+    if np.max(np.abs(r), initial=0.0) > 1e-6 and n_eq >= model.nq:
         sol = least_squares(lambda x: fun(x)[0], q, jac=lambda x: fun(x)[1], method="lm",
                             xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
         q = sol.x
-    for _ in range(20):  # Newton polish to machine precision
+    for _ in range(20 if n_eq >= model.nq else 60):  # Newton polish to machine precision
+        # (fewer rows than coordinates: the least change, Gauss-Newton's minimum norm)
         r, J = fun(q)
         if np.max(np.abs(r), initial=0.0) < 1e-14:
             break
@@ -166,6 +172,12 @@ def _solve_velocities(model: Model, q: np.ndarray, t: float, p: np.ndarray,
     con, _, c_q = model.kinematics(q, t, p)
     J = np.vstack([con.Phi_q[act], c_q[kidx]])
     rhs = np.concatenate([-con.Phi_t[act], [rates[n] for n in names]])
+    if J.shape[0] < J.shape[1] and model.mech.spatial:
+        # the free motion no rate names: the bodies' guessed velocities, made consistent
+        # by the least change in kinetic energy's metric
+        vg = velocity_guess(model, q)
+        w = 1.0 / np.sqrt(model.mass)
+        return vg + w * np.linalg.lstsq(J * w, rhs - J @ vg, rcond=None)[0]
     if J.shape[0] < J.shape[1]:
         raise ModelError(Problem("initial", "velocities", f"expected {model.nq - len(act)} "
                                  f"joint rates, got {len(names)}"), model.mech.source)

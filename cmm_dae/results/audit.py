@@ -84,8 +84,9 @@ def energy_audit(res: Any) -> Energy:
     T = 0.5 * np.sum(mass * d["v"] ** 2, axis=1)
     g = np.asarray(m.gravity)
     q = d["q"]
-    nb = len(m.bodies)
-    Vg = -sum(mass[3 * i] * (g[0] * q[:, 3 * i] + g[1] * q[:, 3 * i + 1]) for i in range(nb))
+    nb, dim = len(m.bodies), g.size
+    nqb = q.shape[1] // max(nb, 1)  # (3 a planar body, 12 a spatial one)
+    Vg = -sum(mass[nqb * i] * (q[:, nqb * i:nqb * i + dim] @ g) for i in range(nb))
     Vs = np.zeros(res.t.size)
     for name, (k, rest) in m.springs.items():
         Vs = Vs + 0.5 * k * (res.joint(name).position - rest) ** 2

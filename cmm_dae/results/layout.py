@@ -53,6 +53,12 @@ class Layout:
     slides : dict
         Unilateral contact with friction -> the column of its slide (its arc length) in
         the coordinate series; its friction is the slide's.
+    space : str
+        "planar" or "spatial" (then points and centroids have three coordinates, the
+        masses are twelve entries per body and the coordinates are natural ones).
+    principal : tuple of 9 floats
+        Spatial: each body's principal axes of inertia in its frame (the 3 x 3 matrix by
+        columns).
     """
 
     mechanism: str = ""
@@ -80,6 +86,8 @@ class Layout:
     limits: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     curves: dict[str, dict[str, Any]] = field(default_factory=dict)
     slides: dict[str, int] = field(default_factory=dict)
+    space: str = "planar"
+    principal: tuple[tuple[float, ...], ...] = ()
 
     @classmethod
     def of(cls, meta: dict[str, Any]) -> Layout:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import Status
+from ..description.spatial import principal
 from ..equations import outputs
 from ..equations.codegen import map_width
 from ..equations.kkt import batch as batch_kkt
@@ -91,9 +92,9 @@ def _samples(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.nd
         for x in model.mapped("outputs_fn", n)(q.T, P.T, lam.T))
     nj = len(model.joint_names)
     return {"a": a, "lam": lam, "c": c, "cd": cd, "cdd": cdd,
-            "jforce": jforce.reshape(n, nj, 2), "gforce": gforce.reshape(n, -1, 2),
-            "jtorque": jtorque, "effort": effort, "drift_pos": drift_pos,
-            "drift_vel": drift_vel,
+            "jforce": jforce.reshape(n, nj, model.dim), "gforce": gforce.reshape(n, -1, 2),
+            "jtorque": jtorque.reshape(n, nj, 3) if model.dim == 3 else jtorque,
+            "effort": effort, "drift_pos": drift_pos, "drift_vel": drift_vel,
             "elem_len": extras[0], "elem_rate": extras[1], "elem_tension": extras[2],
             "load_value": extras[3], "load_power": extras[4]}
 
@@ -176,7 +177,8 @@ def _series(model: Model, t: np.ndarray, q: np.ndarray, v: np.ndarray, config: n
                        len(model.load_names))
         ser = {"a": np.zeros((0, model.nq)), "lam": np.zeros((0, len(model.all_rows))),
                **{k: np.zeros((0, len(model.jidx))) for k in ("c", "cd", "cdd")},
-               "jforce": np.zeros((0, nj, 2)), "jtorque": np.zeros((0, nj)),
+               "jforce": np.zeros((0, nj, model.dim)),
+               "jtorque": np.zeros((0, nj) + (3,) * (model.dim == 3)),
                "gforce": np.zeros((0, len(model.mech.gears), 2)),
                "effort": np.zeros((0, len(model.driver_names))),
                "drift_pos": np.zeros(0), "drift_vel": np.zeros(0),
@@ -223,6 +225,10 @@ def _meta(model: Model) -> dict:
         "bodies": model.body_names,
         "centroids": [list(b.centroid) for b in mech.bodies.values()],
         "masses": model.mass.tolist(),
+        "space": mech.space,
+        # a spatial body's principal axes in its frame (rows of the 3 x 3 matrix's columns)
+        "principal": [principal(b.inertia)[0].T.reshape(-1).tolist()
+                      for b in mech.bodies.values()] if mech.spatial else [],
         "joints": model.joint_names,
         "joint_types": [j.type for j in mech.joints.values()],
         "drivers": model.driver_names,
@@ -249,7 +255,8 @@ def _meta(model: Model) -> dict:
         "ground": {k: list(v) for k, v in mech.ground.items()},
         "connects": {n: [j.first, j.second] for n, j in mech.joints.items()},
         # for drawings: guides of prismatic joints and the stops of metamorphic joints
-        "axes": {n: list(j.axis) for n, j in mech.joints.items() if j.type == "prismatic"},
+        "axes": {n: list(j.axis) for n, j in mech.joints.items()
+                 if j.type == "prismatic" and not mech.spatial},
         "limits": {n: [j.stops.lower, j.stops.upper] for n, j in mech.joints.items()
                    if j.stops is not None and not j.lands},
         # and the curves of contact joints, in their first body's frame

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.errors import STATUS_MESSAGES, CmmError, Status
 from ..core.records import Configuration, Event, Stats
+from ..description.spatial import quaternion
 from .audit import Energy, energy_audit
 from .export import columns, save, to_csv, to_dataframe
 from .layout import Layout
@@ -91,6 +92,23 @@ class BodySeries:
     pose: np.ndarray
     velocity: np.ndarray
     acceleration: np.ndarray
+
+
+def _spatial_body(lay, data, i: int) -> BodySeries:
+    """A spatial body's frame: pose (n, 7) origin (m) and unit quaternion (w, x, y, z);
+    velocity and acceleration (n, 6): the origin's (m/s, m/s^2) and the angular ones in
+    global axes (rad/s, rad/s^2; omega = sum_k e_k x e_k' / 2 over the principal axes)."""
+    q, v, a = (data[k][:, 12 * i:12 * i + 12] for k in ("q", "v", "a"))
+    E, Ed, Edd = (x[:, 3:].reshape(-1, 3, 3) for x in (q, v, a))  # rows: e1, e2, e3
+    R = np.asarray(lay.principal[i], float).reshape(3, 3)  # rows: the principal axes
+    X = R @ np.asarray(lay.centroids[i], float)  # the centroid in principal coordinates
+    om = 0.5 * np.cross(E, Ed).sum(axis=1)
+    al = 0.5 * np.cross(E, Edd).sum(axis=1)
+    rot = E.transpose(0, 2, 1) @ R  # the body frame's axes, columns
+    pose = np.column_stack([q[:, :3] - np.einsum("nkj,k->nj", E, X), quaternion(rot)])
+    vel = np.column_stack([v[:, :3] - np.einsum("nkj,k->nj", Ed, X), om])
+    acc = np.column_stack([a[:, :3] - np.einsum("nkj,k->nj", Edd, X), al])
+    return BodySeries(pose, vel, acc)
 
 
 class _Series(dict):
@@ -246,6 +264,8 @@ class Result:
     def body(self, name: str) -> BodySeries:
         """Time series of body ``name`` (its frame, not its centroid)."""
         i = self._index("bodies", name)
+        if self.layout.space == "spatial":
+            return _spatial_body(self.layout, self.data, i)
         cx, cy = self.layout.centroids[i]
         q, v, a = (self.data[k][:, 3 * i:3 * i + 3] for k in ("q", "v", "a"))
         th, om, al = q[:, 2], v[:, 2], a[:, 2]

@@ -269,12 +269,12 @@ def _start(mech: Mechanism, model: Model | None) -> tuple:
             model = model_of(mech, _build)
         elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
             model = _without_redundant(model)
-        # (the structure analysis behind the labels: once per model)
-        hs = ev.HybridState(model, once(model, ("labeller",), lambda: labeller(mech)),
-                            force_held=force_constraint_joints(mech))
+        # (the labels' structure analysis once per model; in space, its rank's mobility)
+        hs = ev.HybridState(model, once(model, ("labeller",), lambda: labeller(
+            mech, mobility=model.mobility if mech.spatial else None)),
+            force_held=force_constraint_joints(mech))
         q, v, events = start_state(model, hs)
-        # the accelerations must be determined at the start (once per start: 1 ms a run
-        # with 32 loops)
+        # the accelerations must be determined at the start (once: 1 ms a run, 32 loops)
         once(model, ("start kkt", q.tobytes(), v.tobytes(), hs.p.tobytes()),
              lambda: model.kkt(q, v, 0.0, hs.p) and True)
     except CmmError:
