@@ -10,11 +10,12 @@ from .mechanism import Curve, Gear
 from .schema import default, keys_of
 
 
-def contact_keys(r: Any, t: str, d: dict, jtype: str) -> tuple[Curve | None, str, bool]:
+def contact_keys(r: Any, t: str, d: dict, jtype: str, spatial: bool = False
+                 ) -> tuple[Curve | None, str, bool]:
     """``(curve, side, unilateral)`` of joint table ``t`` (``d``) read with the loader's
     reader ``r``, each problem noted there; keys only a contact may have refused on the
-    other joint types (and a prismatic joint's keys on the others)."""
-    if jtype in ("revolute", "contact"):
+    other joint types (and a planar prismatic joint's keys on the others)."""
+    if jtype in ("revolute", "contact") and not spatial:
         for k in ("axis", "angle"):
             if k in d:
                 r.bad(t, k, "only a prismatic joint has this key")

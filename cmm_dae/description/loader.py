@@ -215,7 +215,7 @@ def _joint(r: _Reader, name: str, d: Any, spatial: bool = False) -> Joint:
     if jtype and jtype not in types:
         r.bad(t, "type", f"expected one of {', '.join(map(repr, types))}, got {jtype!r}")
     first, second = _connects(r, t, d)
-    curve, side, unilateral = contact_keys(r, t, d, jtype)
+    curve, side, unilateral = contact_keys(r, t, d, jtype, spatial)
     axes = reference = None
     if spatial:
         axes, reference = read_joint_axes(r, t, d, jtype)

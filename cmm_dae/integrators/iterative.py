@@ -21,7 +21,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..core.errors import SolverError, Status
+from ..core.errors import ModelError, Problem, SolverError, Status
 from ..core.records import Stats
 from ..equations import kkt, rank
 from ..equations.codegen import Buffered
@@ -50,6 +50,12 @@ def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
         if sv[-1] > 1e-6 * max(1.0, sv[0]):
             return pref
     rows = C[[model.jidx[n] for n in cand]]
+    if rank.rank(rows) < dof if rows.size else True:
+        raise ModelError(Problem("joints", "", f"the fixed-step algorithm advances joint "
+                                 f"coordinates, and those of this mechanism span "
+                                 f"{rank.rank(rows) if rows.size else 0} of its {dof} free "
+                                 f"motions at t = {t:g} s (a spherical or universal joint's "
+                                 "rotation has none): use run_dae"), model.mech.source)
     # greedy pivoting: pick the coordinate with the largest remaining rate component
     chosen: list[int] = []
     R = rows.copy()
