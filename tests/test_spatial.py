@@ -1,0 +1,212 @@
+"""Spatial mechanisms against independent references: the spherical pendulum's
+minimal-coordinate equations, the Bennett linkage's closed-form input-output relation,
+planar mechanisms written as spatial files against the planar model, energy balance, and
+the checks of bad spatial input."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
+
+import cmm_dae as cd
+from cmm_dae.core.errors import ModelError, SolverError
+
+pytestmark = pytest.mark.timeout(120)
+
+HERE = Path(__file__).parent
+G = 9.81
+
+
+def _pendulum_reference(mech, t):
+    """The rod's unit direction u(t) (n, 3), its rate and acceleration from the spherical
+    pendulum's equations in (theta from the downward vertical, phi), with the pivot inertia
+    I0 + m L^2 (the bob's centroidal inertia is isotropic and it does not spin about the
+    rod, so the spin stays 0 and u obeys them; DOP853 at rtol 1e-13)."""
+    b = mech.bodies["bob"]
+    L, m, I0 = 0.5, b.mass, b.inertia[0]
+    k = m * G * L / (I0 + m * L**2)
+
+    def rhs(_, y):
+        th, ph, thd, phd = y
+        return [thd, phd, np.sin(th) * np.cos(th) * phd**2 - k * np.sin(th),
+                -2.0 * np.cos(th) / np.sin(th) * thd * phd]
+
+    a = np.arctan2(0.6, 0.8)  # the file's tilt, and its swing 3 rad/s across the rod
+    sol = solve_ivp(rhs, (0.0, t[-1]), [a, np.pi / 2, 0.0, 3.0 / np.sin(a)], t_eval=t,
+                    rtol=1e-13, atol=1e-13, method="DOP853")
+    th, ph, thd, phd = sol.y
+    acc = np.array([rhs(0.0, y)[2:] for y in sol.y.T]).T
+    u = np.column_stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), -np.cos(th)])
+    # u'' from (theta, phi) and their rates and accelerations, by the chain rule
+    s, c, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
+    thdd, phdd = acc
+    udd = np.column_stack([
+        -s * cp * (thd**2 + phd**2) + c * cp * thdd - s * sp * phdd - 2 * c * sp * thd * phd,
+        -s * sp * (thd**2 + phd**2) + c * sp * thdd + s * cp * phdd + 2 * c * cp * thd * phd,
+        c * thd**2 + s * thdd])
+    return L * u, L * udd
+
+
+def test_spherical_pendulum_follows_its_minimal_coordinate_equations():
+    mech = cd.load(cd.example("spherical_pendulum"))
+    res = cd.run_dae(mech, t_end=5.0, rtol=1e-10)
+    assert res.status == "success"
+    r_ref, a_ref = _pendulum_reference(mech, res.t)
+    centroid = res.data["q"][:, :3]
+    assert np.max(np.abs(centroid - r_ref)) < 1e-8  # m (measured 9e-10 over 10 s)
+    # the pivot's force on the bob is m (a - g) (Newton for the centroid), its moment zero
+    F = res.joint("O").force
+    g = np.array([0.0, 0.0, -G])
+    assert np.max(np.abs(F - mech.bodies["bob"].mass * (a_ref - g))) < 1e-6  # N, of 10
+    assert np.max(np.abs(res.joint("O").torque)) < 1e-9
+    e = res.energy()
+    assert np.max(np.abs(e.residual)) < 1e-8  # J
+
+
+def test_body_pose_is_its_frame_as_a_unit_quaternion():
+    mech = cd.load(cd.example("bennett_linkage"))
+    res = cd.run_dae(mech, t_end=0.5, rtol=1e-10)
+    for i, name in enumerate(res.layout.bodies):
+        pose = res.body(name).pose
+        assert np.allclose(np.linalg.norm(pose[:, 3:], axis=1), 1.0, rtol=0, atol=1e-14)
+        E = res.data["q"][:, 12 * i + 3:12 * i + 12].reshape(-1, 3, 3)  # rows: axes
+        # scipy's quaternions are (x, y, z, w); the body axes here are principal ones
+        R = Rotation.from_quat(np.column_stack([pose[:, 4:], pose[:, 3]])).as_matrix()
+        assert np.max(np.abs(R - E.transpose(0, 2, 1))) < 1e-9  # (unit vectors)
+        c = np.array(mech.bodies[name].centroid)  # (R orthonormal, E so to 1e-9)
+        assert np.max(np.abs(pose[:, :3] + R @ c - res.data["q"][:, 12 * i:12 * i + 3])) \
+            < 1e-12
+
+
+def test_bennett_linkage_keeps_its_closed_form_relation_and_its_energy():
+    mech = cd.load(cd.example("bennett_linkage"))
+    res = cd.run_dae(mech, t_end=10.0, rtol=1e-10)
+    assert res.status == "success" and not res.events
+    al, be = np.pi / 6, np.pi / 3
+    K = np.sin((be + al) / 2) / np.sin((be - al) / 2)
+    th1, th2 = res.joint("J1").position, res.joint("J2").position
+    # tan(th1/2) tan(th2/2) = K, written without the tangents' poles
+    rel = np.sin(th1 / 2) * np.sin(th2 / 2) - K * np.cos(th1 / 2) * np.cos(th2 / 2)
+    assert np.max(np.abs(rel)) < 1e-10  # (measured 7e-12)
+    assert np.ptp(th1) > 0.7  # it swings (1 -> 0.29 rad)
+    assert np.max(np.abs(res.energy().residual)) < 1e-8  # J (measured 5e-10)
+    # 36 coordinates, 18 body rows, 20 joint rows, mobility 1: 3 rows redundant
+    assert len(res.layout.redundant) == 3
+    assert res.configurations[0].dof == 1
+
+
+def _planar_vs_spatial(planar, spatial, t_end):
+    # (at rtol 1e-12: both within 1e-10 of the motion, so of each other)
+    a = cd.run_dae(cd.load(planar), t_end=t_end, rtol=1e-12)
+    b = cd.run_dae(cd.load(spatial), t_end=t_end, rtol=1e-12)
+    assert a.t.size == b.t.size and np.max(np.abs(a.t - b.t)) < 1e-8  # (event instants)
+    for i, _ in enumerate(a.layout.bodies):
+        qa, qb = a.data["q"][:, 3 * i:3 * i + 3], b.data["q"][:, 12 * i:12 * i + 12]
+        assert np.max(np.abs(qa[:, :2] - qb[:, :2])) < 1e-10  # m
+        assert np.max(np.abs(qb[:, 2])) < 1e-14  # stays in its plane
+        th = np.arctan2(qb[:, 4], qb[:, 3])
+        assert np.max(np.abs(np.angle(np.exp(1j * (th - qa[:, 2]))))) < 1e-9  # rad
+    for j in a.layout.joints:
+        fa, fb = a.joint(j).force, b.joint(j).force
+        assert np.max(np.abs(fa - fb[:, :2])) < 1e-9 * max(1.0, np.max(np.abs(fa)))
+        assert np.max(np.abs(a.joint(j).torque - b.joint(j).torque[:, 2])) < 1e-12
+    return a, b
+
+
+def test_a_planar_four_bar_written_in_space_gives_the_planar_results():
+    a, b = _planar_vs_spatial(cd.example("four_bar"), cd.example("four_bar_spatial"), 2.0)
+    assert np.max(np.abs(a.driver("A").effort - b.driver("A").effort)) < 1e-10  # N m
+    assert len(b.layout.redundant) == 3  # the loop's out-of-plane closure
+
+
+def test_a_spatial_stop_locks_as_the_planar_one():
+    a, b = _planar_vs_spatial(cd.example("pendulum_stop"),
+                              HERE / "models" / "pendulum_stop_spatial.toml", 1.0)
+    (ea,), (eb,) = a.events, b.events
+    assert ea.kind == eb.kind == "limit" and abs(ea.t - eb.t) < 1e-8  # s
+    assert b.configurations[-1].dof == 0
+
+
+def test_c_and_python_paths_agree_bit_for_bit_in_space(module_cache):
+    mech = cd.load(cd.example("bennett_linkage"))
+    py = cd.run_dae(mech, t_end=1.0, rtol=1e-10, compiled=False)
+    c = cd.run_dae(mech, t_end=1.0, rtol=1e-10, compiled=True)
+    assert c.meta["compiled"] and not py.meta["compiled"]
+    assert np.array_equal(py.data["q"], c.data["q"])
+    assert py.stats.steps == c.stats.steps
+
+
+def test_fixed_step_algorithm_in_space():
+    mech = cd.load(cd.example("bennett_linkage"))
+    ida = cd.run_dae(mech, t_end=1.0, rtol=1e-12)
+    errs = []
+    for dt in (1e-3, 1e-4):
+        it = cd.run_iterative(mech, t_end=1.0, dt=dt)
+        k = np.searchsorted(it.t, 1.0 - 1e-9)
+        errs.append(abs(it.joint("J1").position[k] - ida.joint("J1").position[-1]))
+    assert errs[1] < errs[0] / 5  # first order, as in the plane (measured 10x)
+    # a spherical joint's rotation has no joint coordinate to advance: said, not NaN
+    with pytest.raises(SolverError, match="joint coordinates"):
+        cd.run_iterative(cd.load(cd.example("spherical_pendulum")), t_end=0.1, dt=1e-3)
+
+
+BAD = {
+    "axis of zero length": ('axes = { z = [0.0, 0.0, 1.0], x = [1.0, 0.0, 0.0] }',
+                            'axes = { z = [0.0, 0.0, 0.0], x = [1.0, 0.0, 0.0] }',
+                            "[ground] axes.z: expected a non-zero direction"),
+    "inertia not positive definite": ("inertia = [1.0e-5, 3.0e-3, 3.0e-3]",
+                                      "inertia = [1.0e-5, 3.0e-3, 3.0e-3, 0.01, 0.0, 0.0]",
+                                      "[bodies.rod] inertia: the tensor is not positive"),
+    "no such rigid body": ("inertia = [1.0e-5, 3.0e-3, 3.0e-3]",
+                           "inertia = [1.0e-5, 3.0e-3, 1.0e-3]",
+                           "[bodies.rod] inertia: a principal moment is not below"),
+    "limit on a spherical joint": ('type = "revolute"', 'type = "spherical"',
+                                   "[joints.O] limits: a spherical joint has no coordinate"),
+    "a point in the plane": ("tip = [0.3, 0.0, 0.0]", "tip = [0.3, 0.0]",
+                             "[bodies.rod.points] tip: expected a list of 3 numbers"),
+    "an unknown axis": ('axis = ["ground.z", "rod.z"]', 'axis = ["ground.z", "rod.w"]',
+                        "[joints.O] axis: body 'rod' has no axis 'w' (its axes: z, x)"),
+    "a planar key": ('axis = ["ground.z", "rod.z"]',
+                     'axis = ["ground.z", "rod.z"]\nangle = 0.1',
+                     "[joints.O] angle: planar only"),
+    "a reference along the axis": ('axis = ["ground.z", "rod.z"]',
+                                   'axis = ["ground.z", "rod.z"]\nreference = ["ground.z", '
+                                   '"rod.x"]', "[joints.O] reference: 'ground.z' is parallel"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_spatial_input_names_the_key(case, tmp_path):
+    old, new, message = BAD[case]
+    text = (HERE / "models" / "pendulum_stop_spatial.toml").read_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(ModelError) as err:
+        cd.load(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_universal_joint_with_parallel_arms_is_refused(tmp_path):
+    text = (HERE / "models" / "pendulum_stop_spatial.toml").read_text()
+    text = text.replace('type = "revolute"', 'type = "universal"').replace(
+        'axis = ["ground.z", "rod.z"]', 'axes = ["ground.z", "rod.z"]').replace(
+        "limits = { lower = -0.6 }\nrestitution = 0.0\n", "").replace(
+        "[initial]\njoints = { O = 0.3 }\nvelocities = { O = 0.0 }\n", "")
+    path = tmp_path / "universal.toml"
+    path.write_text(text)
+    with pytest.raises(ModelError, match=r"\[joints.O\] axes: the two arms are parallel"):
+        cd.load(path)
+    path.write_text(text.replace('axes = ["ground.z", "rod.z"]', 'axes = ["ground.z", "rod.x"]'))
+    assert cd.load(path).joints["O"].rows == 4
+
+
+def test_spatial_keys_in_a_planar_file_are_refused(tmp_path):
+    text = cd.example("pendulum_stop").read_text()
+    path = tmp_path / "planar.toml"
+    path.write_text(text.replace('connects = ["ground.O", "rod.O"]',
+                                 'connects = ["ground.O", "rod.O"]\nreference = ["a", "b"]'))
+    with pytest.raises(ModelError, match=r"\[joints.O\] reference: spatial mechanisms only"):
+        cd.load(path)
