@@ -210,3 +210,67 @@ def test_spatial_keys_in_a_planar_file_are_refused(tmp_path):
                                  'connects = ["ground.O", "rod.O"]\nreference = ["a", "b"]'))
     with pytest.raises(ModelError, match=r"\[joints.O\] reference: spatial mechanisms only"):
         cd.load(path)
+
+
+def _nearest_root(base, dl, near):
+    """The root ``base +- dl`` of ``a cos x + b sin x = c`` nearest ``near`` (rad)."""
+    roots = np.array([base + dl, base - dl])
+    d = np.angle(np.exp(1j * (roots - near)))
+    return near + d[np.argmin(np.abs(d))]
+
+
+def test_rsur_four_bar_follows_its_closed_form_positions_and_energy():
+    res = cd.run_dae(cd.load(cd.example("rsur_four_bar")), t_end=3.0, rtol=1e-10)
+    r1, r3, L = 0.03, 0.08, 0.14520499232974682
+    D = np.array([0.1, 0.0, 0.06])
+    th, ph = res.joint("A").position, res.joint("D").position
+    # |B(th) - C(ph)| = L with B on the crank's circle, C on the rocker's about x
+    e = np.column_stack([r1 * np.cos(th), r1 * np.sin(th), 0 * th]) - D
+    a, b = 2 * r3 * e[:, 1], 2 * r3 * e[:, 2]
+    c = (e * e).sum(axis=1) + r3**2 - L**2
+    ref = [_nearest_root(np.arctan2(y, x), np.arccos(z / np.hypot(x, y)), p)
+           for x, y, z, p in zip(a, b, c, ph, strict=True)]
+    assert np.max(np.abs(np.angle(np.exp(1j * (np.array(ref) - ph))))) < 1e-9  # (4e-11)
+    assert np.ptp(th) > 6.0 and np.ptp(ph) > 1.5  # the crank turns, the rocker rocks
+    assert np.max(np.abs(res.energy().residual)) < 1e-8  # J (measured 7e-9)
+    assert not res.layout.redundant and res.configurations[0].dof == 1
+
+
+def _Ry(t):
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _Rz(t):
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_carton_fold_locks_into_a_spherical_four_bar():
+    """The flap's crease E meets its stop and locks: mobility 2 -> 1, and the driven
+    four-bar left then follows the spherical four-bar's closed form (its coupler arc the
+    flap's and the coupler panel's, folded at the stop)."""
+    mech = cd.load(cd.example("carton_fold"))
+    res = cd.run_dae(mech, t_end=4.0, rtol=1e-10)
+    assert res.status == "success"
+    (lock,) = res.events
+    assert lock.kind == "limit" and lock.joint == "E"
+    assert [c.dof for c in res.configurations] == [2, 1]
+    tight = cd.run_dae(mech, t_end=0.2, rtol=1e-12)
+    assert abs(tight.events[0].t - lock.t) < 1e-9  # s (rtol 1e-10 against 1e-12)
+    a1, b1, b2, a3, a4 = np.deg2rad([40, 35, 45, 60, 70])
+    z = np.array([0.0, 0.0, 1.0])
+    cos_arc = z @ _Ry(b1) @ _Rz(0.3) @ _Ry(b2) @ z  # flap + coupler, E at its stop
+    u4, w0 = _Ry(a4) @ z, _Ry(a4) @ _Ry(a3) @ z  # the output crease, its end at D = 0
+    after = res.t > lock.t + 1e-9
+    errs = []
+    for th, ph in zip(res.joint("A").position[after], res.joint("D").position[after],
+                      strict=True):
+        u2 = _Rz(th) @ _Ry(a1) @ z
+        a = u2 @ (w0 - u4 * (u4 @ w0))
+        b = u2 @ np.cross(u4, w0)
+        c = cos_arc - (u2 @ u4) * (u4 @ w0)
+        ref = _nearest_root(np.arctan2(b, a), np.arccos(c / np.hypot(a, b)), ph)
+        errs.append(abs(ref - ph))
+    assert max(errs) < 1e-9  # rad (measured 1.2e-11)
+    assert np.max(np.abs(res.energy().residual)) < 1e-8  # J, the lock's loss booked
