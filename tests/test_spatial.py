@@ -236,12 +236,12 @@ def test_rsur_four_bar_follows_its_closed_form_positions_and_energy():
     assert not res.layout.redundant and res.configurations[0].dof == 1
 
 
-def _Ry(t):
+def _rot_y(t):
     c, s = np.cos(t), np.sin(t)
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
 
 
-def _Rz(t):
+def _rot_z(t):
     c, s = np.cos(t), np.sin(t)
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
@@ -260,13 +260,13 @@ def test_carton_fold_locks_into_a_spherical_four_bar():
     assert abs(tight.events[0].t - lock.t) < 1e-9  # s (rtol 1e-10 against 1e-12)
     a1, b1, b2, a3, a4 = np.deg2rad([40, 35, 45, 60, 70])
     z = np.array([0.0, 0.0, 1.0])
-    cos_arc = z @ _Ry(b1) @ _Rz(0.3) @ _Ry(b2) @ z  # flap + coupler, E at its stop
-    u4, w0 = _Ry(a4) @ z, _Ry(a4) @ _Ry(a3) @ z  # the output crease, its end at D = 0
+    cos_arc = z @ _rot_y(b1) @ _rot_z(0.3) @ _rot_y(b2) @ z  # flap + coupler, E at its stop
+    u4, w0 = _rot_y(a4) @ z, _rot_y(a4) @ _rot_y(a3) @ z  # the output crease, its end at D = 0
     after = res.t > lock.t + 1e-9
     errs = []
     for th, ph in zip(res.joint("A").position[after], res.joint("D").position[after],
                       strict=True):
-        u2 = _Rz(th) @ _Ry(a1) @ z
+        u2 = _rot_z(th) @ _rot_y(a1) @ z
         a = u2 @ (w0 - u4 * (u4 @ w0))
         b = u2 @ np.cross(u4, w0)
         c = cos_arc - (u2 @ u4) * (u4 @ w0)
