@@ -40,13 +40,14 @@ from .description.mechanism import (
     Zone,
 )
 from .description.params import with_params
-from .description.structure import Group, Structure, labeller, structure
+from .description.structure import Group, Structure, labeller
 from .equations.model import Model
 from .report.compare import Comparison, compare
 from .results.result import Result
 from .results.storage import load_result
 from .sensitivity.run import Sensitivities, sensitivities
 from .simulation.runner import METHODS, run_dae, run_iterative, simulate
+from .simulation.structure import structure
 from .studies.design import Design, DesignError, Target, design
 from .studies.precision import Convergence, WorkPrecision, convergence, work_precision
 from .studies.sweep import SweepTable, sweep

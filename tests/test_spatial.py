@@ -274,3 +274,16 @@ def test_carton_fold_locks_into_a_spherical_four_bar():
         errs.append(abs(ref - ph))
     assert max(errs) < 1e-9  # rad (measured 1.2e-11)
     assert np.max(np.abs(res.energy().residual)) < 1e-8  # J, the lock's loss booked
+
+
+@pytest.mark.parametrize(("name", "mobility", "redundant"), [
+    ("bennett_linkage", 1, 3), ("carton_fold", 2, 3), ("rsur_four_bar", 1, 0),
+    ("spherical_pendulum", 3, 0), ("four_bar_spatial", 1, 3)])
+def test_spatial_structure_is_the_rank_deficit(name, mobility, redundant):
+    st = cd.structure(cd.load(cd.example(name)))
+    # by hand: Bennett 4R (Grübler -2), a spherical 5R (2), RSUR 6 * 3 - 5 - 3 - 4 - 5,
+    # the ball joint's 3, a four-bar whose parallel axes repeat its plane 3 times
+    assert st.mobility == mobility and len(st.redundant) == redundant
+    assert all(r.startswith("joint ") for r in st.redundant)
+    assert f"mobility (rank of the constraint Jacobian at the start, drivers removed): " \
+        f"{mobility}" in str(st)

@@ -74,6 +74,9 @@ class Structure:
     unresolved: tuple[str, ...] = field(default=())
     force_constraints: tuple[str, ...] = ()
     examined: int = 0
+    #: a spatial mechanism's rows found redundant at its start ("joint J1", ...), whose
+    #: mobility is the constraint Jacobian's rank deficit (no Assur groups searched)
+    redundant: tuple[str, ...] | None = None
 
     def group_of(self, joint: str) -> Group | None:
         for g in self.groups:
@@ -82,6 +85,16 @@ class Structure:
         return None
 
     def __str__(self) -> str:
+        if self.redundant is not None:  # a spatial mechanism (simulation.structure)
+            return "\n".join([
+                f"Structure of '{self.mechanism}' (spatial)",
+                f"  mobility (rank of the constraint Jacobian at the start, drivers "
+                f"removed): {self.mobility}",
+                f"  redundant rows: {', '.join(self.redundant) or 'none'}"
+                + " (their reactions are shared at minimum norm)" * bool(self.redundant),
+                f"  driven joints: {', '.join(self.active) or 'none'}",
+                "  Assur groups: not searched in space; configurations are named by "
+                "their locked joints"])
         lines = [f"Structure of '{self.mechanism}'",
                  f"  mobility (Grübler, drivers removed): {self.mobility}",
                  f"  active parts: {', '.join(self.active) or 'none'}"]

@@ -309,8 +309,9 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
     d = np.abs(np.diag(R))
     rank = int(np.sum(d > tol * d[0])) if d.size and d[0] > 0 else 0
     pins = set(ground_pins(model.mech).values())
+    # (a spatial body's own rows are kept too: a joint's rows are the redundant ones)
     keep = [i for i, r in enumerate(model.all_rows[:model.n_base])
-            if r.kind == "joint" and r.name in pins]
+            if r.kind == "joint" and r.name in pins or r.kind == "body"]
     if rank == A.shape[0] or not keep or rank < len(keep):
         return tuple(sorted(int(i) for i in piv[rank:]))
     kept = set(keep)
