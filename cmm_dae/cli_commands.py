@@ -172,7 +172,7 @@ def _events(args: argparse.Namespace) -> int:
 
 
 def _structure(args: argparse.Namespace) -> int:
-    from .description.structure import structure
+    from .simulation.structure import structure
 
     print(structure(_load(args.model)))
     return 0
