@@ -91,11 +91,29 @@ def _point_ref(mech: Mechanism, parts: list[str]) -> str | None:
     ``ground.points.P.y``) naming an existing point, else None."""
     if len(parts) == 5 and parts[0] == "bodies" and parts[2] == "points" \
             and parts[1] in mech.bodies and parts[3] in mech.bodies[parts[1]].points \
-            and parts[4] in ("x", "y"):
+            and parts[4] in _axes(mech):
         return f"{parts[1]}.{parts[3]}"
     if len(parts) == 4 and parts[0] == GROUND and parts[1] == "points" \
-            and parts[2] in mech.ground and parts[3] in ("x", "y"):
+            and parts[2] in mech.ground and parts[3] in _axes(mech):
         return f"{GROUND}.{parts[2]}"
+    return None
+
+
+def _axes(mech: Mechanism) -> tuple[str, ...]:
+    """The coordinates a point or the gravity has: x, y (and z in space)."""
+    return ("x", "y", "z") if mech.spatial else ("x", "y")
+
+
+#: the entries of a spatial body's inertia tensor a path may set (``bodies.B.inertia.xx``)
+_TENSOR = ("xx", "yy", "zz", "xy", "xz", "yz")
+
+
+def _tensor_entry(mech: Mechanism, parts: list[str]) -> int | None:
+    """The index of a spatial body's inertia entry a path names, else None."""
+    if mech.spatial and len(parts) == 4 and parts[0] == "bodies" and parts[1] in mech.bodies \
+            and parts[2] == "inertia" and parts[3] in _TENSOR:
+        k = _TENSOR.index(parts[3])
+        return k if k < len(mech.bodies[parts[1]].inertia) else None
     return None
 
 
@@ -125,6 +143,12 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
         return None if _point_used(mech, ref) else Problem(
             "sweep", path, f"has no effect: no joint, force element or load is attached at "
             f"point '{ref}'")
+    if _tensor_entry(mech, parts) is not None:
+        return None
+    if mech.spatial and parts[:1] == ["bodies"] and parts[2:3] == ["inertia"]:
+        return Problem("parameters", path, "a spatial body's inertia is a tensor: name one "
+                       "entry, bodies.NAME.inertia.xx|yy|zz (principal moments) or "
+                       ".xy|xz|yz (products, where six are given)")
     tables = {k: getattr(mech, k) for k in _TABLES}
     if parts[0] in tables and len(parts) in (3, 4) and parts[1] in tables[parts[0]] \
             and ".".join(parts[2:]) in _FIELDS[parts[0]]:
@@ -136,7 +160,7 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
         return None if why is None else Problem("parameters", path, f"has no effect: {why}")
     if (parts[0] == "initial" and len(parts) == 3 and parts[1] in ("joints", "velocities")
             and parts[2] in mech.joints) or (parts[0] == "gravity" and len(parts) == 2
-                                             and parts[1] in ("x", "y")):
+                                             and parts[1] in _axes(mech)):
         return None
     return Problem("parameters", path, f"not a parameter of the mechanism{_hint(mech, parts)}; "
                    f"e.g. {', '.join(examples(mech))}")
@@ -184,10 +208,13 @@ def param_value(mech: Mechanism, path: str) -> float:
     if bad is not None:
         raise ModelError(bad, mech.source)
     if parts[0] == "gravity":
-        return mech.gravity["xy".index(parts[1])]
+        return mech.gravity["xyz".index(parts[1])]
     ref = _point_ref(mech, parts)
     if ref is not None:
-        return float(mech.point(ref)["xy".index(parts[-1])])
+        return float(mech.point(ref)["xyz".index(parts[-1])])
+    k = _tensor_entry(mech, parts)
+    if k is not None:
+        return float(mech.bodies[parts[1]].inertia[k])
     if parts[0] == "initial":
         table = mech.initial.joints if parts[1] == "joints" else mech.initial.velocities
         return float(table.get(parts[2], math.nan))
@@ -214,7 +241,9 @@ def with_params(mech: Mechanism, values: Mapping[str, float]) -> Mechanism:
     ``loads.NAME.value|mean|amplitude|frequency|phase|stall|no_load_speed`` (as its law
     reads them), point coordinates in their frame
     (link lengths, pivot positions) ``bodies.NAME.points.POINT.x|y`` and
-    ``ground.points.POINT.x|y``, m.
+    ``ground.points.POINT.x|y``, m. In a spatial mechanism points and gravity have ``z``
+    too, and a body's inertia is set entry by entry:
+    ``bodies.NAME.inertia.xx|yy|zz|xy|xz|yz`` (kg m^2).
 
     Raises
     ------
@@ -258,8 +287,16 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
                 parts[1], dict(mech.bodies[parts[1]].points))
             name = parts[-2]
             xy = list(pts[name])
-            xy["xy".index(parts[-1])] = value
+            xy["xyz".index(parts[-1])] = value
             pts[name] = tuple(xy)
+        elif _tensor_entry(mech, parts) is not None:
+            b = tables["bodies"][parts[1]]
+            entries = list(b.inertia)
+            entries[_tensor_entry(mech, parts)] = value
+            b = replace(b, inertia=tuple(entries))
+            if not check:  # (the constructor makes the entries floats: a symbol NaN)
+                object.__setattr__(b, "inertia", tuple(entries))
+            tables["bodies"][parts[1]] = b
         elif parts[0] == "loads":
             ld = loads[parts[1]]
             loads[parts[1]] = replace(ld, law=replace(ld.law, **{parts[2]: value}))
@@ -278,7 +315,7 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
         elif parts[0] == "initial":
             (ini_j if parts[1] == "joints" else ini_v)[parts[2]] = value
         else:
-            gravity["xy".index(parts[1])] = value
+            gravity["xyz".index(parts[1])] = value
     for body, pts in points.items():
         b = replace(tables["bodies"][body], points=pts)
         if not check:  # the constructor makes the points floats

@@ -4,6 +4,7 @@ points."""
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
@@ -15,13 +16,14 @@ Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 
 
-def _floats(v) -> tuple[float, ...]:
+def _floats(v) -> tuple:
     """A point, direction or tensor as a tuple of floats (any length: 2 in a planar
-    mechanism, 3 in a spatial one; the checks say when it is the wrong one)."""
+    mechanism, 3 in a spatial one; the checks say when it is the wrong one). Entries that
+    are not real numbers (a sensitivity's symbols, a bad value for the checks) are kept."""
     try:
-        return tuple(float(x) for x in v)
-    except (TypeError, ValueError):  # a symbol (sensitivities) or a bad value: kept as is
-        return tuple(v)
+        return tuple(float(x) if isinstance(x, numbers.Real) else x for x in v)
+    except TypeError:  # not a sequence: the checks report it
+        return (v,)
 
 
 def _frozen(d: dict | None) -> MappingProxyType:

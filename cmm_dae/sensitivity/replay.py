@@ -313,11 +313,15 @@ class SensitivityPass(CrossingPass):
             acc[i] = dz[:nq]
         o = 0
         d = {}
-        for key, w in (("c", nj), ("cd", nj), ("cdd", nj), ("jforce", 2 * nj),
-                       ("jtorque", nj), ("effort", nd), ("gforce", 2 * ng)):
+        dim = model.dim  # (a spatial joint's force and moment are 3-vectors)
+        for key, w in (("c", nj), ("cd", nj), ("cdd", nj), ("jforce", dim * nj),
+                       ("jtorque", nj * (3 if dim == 3 else 1)), ("effort", nd),
+                       ("gforce", 2 * ng)):
             d[key] = out[:, o:o + w]
             o += w
-        d["jforce"] = d["jforce"].reshape(n, nj, 2, P)
+        d["jforce"] = d["jforce"].reshape(n, nj, dim, P)
+        if dim == 3:
+            d["jtorque"] = d["jtorque"].reshape(n, nj, 3, P)
         d["gforce"] = d["gforce"].reshape(n, ng, 2, P)
         d["q"], d["v"], d["a"] = self.sq, self.sv, acc
         return d

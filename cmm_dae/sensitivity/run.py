@@ -134,6 +134,10 @@ class Sensitivities:
     def body(self, name: str) -> BodySensitivity:
         """Derivative of body ``name``'s frame pose (as ``Result.body(name).pose``)."""
         i = self._k("bodies", name)
+        if self.result.layout.space == "spatial":
+            raise CmmError("the derivative of a spatial body's pose (a quaternion) is not "
+                           "given; its natural coordinates' are, in data['q'] (12 a body: "
+                           "centroid, then the three principal axes)")
         cx, cy = self.result.layout.centroids[i]
         sq = self.data["q"][:, 3 * i:3 * i + 3]  # (n, 3, P)
         th = self.result.data["q"][:, 3 * i + 2]
