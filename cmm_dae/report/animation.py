@@ -6,7 +6,8 @@ revolute joint as dashed rays (where the second body's link lies at each limit),
 of each contact joint (a circle, or the stretch of a line the point runs on) and the pitch
 circles of gear pairs as brown lines, and every metamorphic joint as a square, red while
 locked and green while free. The artists are created once and only moved from frame to
-frame.
+frame. A spatial run is drawn in 3D by :class:`.animation3d.Scene3D` (the same options,
+the same GIF and player).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ..core.figures import pyplot
 from ..description.curves import spline
 from ..description.parts import Curve
 from ..equations.gearing import pinion_radius, pitch_radius
+from .animation3d import Scene3D, frame_indices
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..results.result import Result
@@ -38,12 +40,9 @@ class _Scene:
     """World coordinates of everything drawn, at the frames' sample indices."""
 
     def __init__(self, res: Result, max_frames: int) -> None:
-        if not (isinstance(max_frames, int) and max_frames >= 1):
-            raise CmmError(f"frames: expected a whole number >= 1, got {max_frames!r}")
         self.res = res
         lay = res.layout
-        n = res.t.size
-        self.idx = np.unique(np.linspace(0, n - 1, min(max_frames, n)).round().astype(int))
+        self.idx = frame_indices(res, max_frames)
         poses = {b: res.body(b).pose[self.idx] for b in lay.bodies}
         self.poses = poses
         self.tracks = {b: np.stack([self.world(b, xy) for xy in pts.values()], axis=1)
@@ -244,8 +243,9 @@ class _Scene:
 
 def _frames(res: Result, max_frames: int, dpi: int):
     """Frames as RGB arrays, drawn by blitting: the axes, ticks, legend and ground are
-    rendered once, and each frame only redraws the moving artists over that background."""
-    scene = _Scene(res, max_frames)
+    rendered once, and each frame only redraws the moving artists over that background
+    (a spatial run's in 3D, a planar run's in its plane)."""
+    scene = (Scene3D if res.layout.space == "spatial" else _Scene)(res, max_frames)
     fig, update = scene.figure()
     fig.set_dpi(dpi)
     try:
@@ -275,12 +275,12 @@ def gif_path(path: str | Path, key: str = "path") -> Path:
 
 def animate(res: Result, path: str | Path, *, fps: int = 20,
             max_frames: int = DEFAULT_FRAMES, dpi: int = 80) -> Path:
-    """Write a GIF of the mechanism moving.
+    """Write a GIF of the mechanism moving (a spatial mechanism in a 3D view).
 
     Parameters
     ----------
     res : Result
-        A run (IDA or iterative, complete or partial).
+        A run (IDA or iterative, complete or partial; planar or spatial).
     path : str or Path
         The ``.gif`` file to write.
     fps : int
@@ -307,7 +307,8 @@ def animate(res: Result, path: str | Path, *, fps: int = 20,
 def html_animation(res: Result, *, fps: int = 20, max_frames: int = DEFAULT_FRAMES,
                    dpi: int = 80) -> str:
     """An interactive player (play/pause, step, a time slider) as a self-contained HTML
-    fragment, the frames embedded as PNG images; no network access needed to view it."""
+    fragment, the frames embedded as PNG images; no network access needed to view it.
+    A spatial run's frames are the 3D view of :func:`animate` (mplot3d), rendered alike."""
     urls = []
     for f in _frames(res, max_frames, dpi):
         buf = io.BytesIO()

@@ -191,10 +191,18 @@ class Comparison:
 
             player = html_animation(self.a, max_frames=frames)
             page = page.replace("\n</body>", f"\n<h2>Animation ({html.escape(la)})</h2>\n"
-                                f"<p>Locked metamorphic joints red, free ones green; the "
-                                f"guides and stops in grey.</p>\n{player}</body>", 1)
+                                f"<p>{_caption(self.a)}</p>\n{player}</body>", 1)
         (out / "report.html").write_text(page)
         return out / "report.md"
+
+
+def _caption(res: Result) -> str:
+    """What the report's animation of ``res`` shows (a spatial run: a 3D view)."""
+    if res.layout.space == "spatial":
+        return ("A 3D view (equal scales on the three axes, gravity pointing down the "
+                "screen): each body as the lines between its points, ground points as "
+                "black triangles; locked metamorphic joints red, free ones green.")
+    return "Locked metamorphic joints red, free ones green; the guides and stops in grey."
 
 
 def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
@@ -237,16 +245,23 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))
 
     types = dict(zip(a.layout.joints, a.layout.joint_types, strict=True))
+    # a spatial joint's force and moment are 3-vectors: each component is a series
+    spatial = a.layout.space == "spatial"
     for name in a.layout.drivers:
         unit = "N m" if types[name] == "revolute" else "N"
         add(f"driver {name} effort", unit, a.driver(name).effort, b.driver(name).effort)
     for name in a.watched_joints():
         rev = types[name] == "revolute"
         ja, jb = a.joint(name), b.joint(name)
-        add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position)
-        add(f"joint {name} force x", "N", ja.force[:, 0], jb.force[:, 0])
-        add(f"joint {name} force y", "N", ja.force[:, 1], jb.force[:, 1])
-        add(f"joint {name} torque", "N m", ja.torque, jb.torque)
+        if types[name] not in ("spherical", "universal"):  # (no coordinate: zeros)
+            add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position)
+        for k, c in enumerate("xyz" if spatial else "xy"):
+            add(f"joint {name} force {c}", "N", ja.force[:, k], jb.force[:, k])
+        if spatial:
+            for k, c in enumerate("xyz"):
+                add(f"joint {name} torque {c}", "N m", ja.torque[:, k], jb.torque[:, k])
+        else:
+            add(f"joint {name} torque", "N m", ja.torque, jb.torque)
     # A series whose scale is round-off against the largest series of its unit (a revolute
     # joint's torque, a force component along a frictionless guide) has no relative error.
     top: dict[str, float] = {}
