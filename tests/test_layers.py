@@ -138,7 +138,7 @@ def test_an_old_path_leaves_the_api_function_of_its_name():
     import types
 
     import cmm_dae as cd
-    from cmm_dae.description import structure
+    from cmm_dae.simulation import structure
     from cmm_dae.studies import design, sweep
 
     for name, new in (("sweep", sweep), ("structure", structure), ("design", design)):

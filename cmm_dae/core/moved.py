@@ -20,7 +20,7 @@ MOVED = {
     "mechanism": "description.mechanism", "checks": "description.checks",
     "schema": "description.schema", "loader": "description.loader",
     "params": "description.params", "writer": "description.writer",
-    "library": "description.library", "structure": "description.structure",
+    "library": "description.library", "structure": "simulation.structure",
     "iftomm": "description.iftomm",
     "equations": "equations.model", "laws": "equations.laws", "buffers": "equations.codegen",
     "schur": "equations.kkt", "kinematics": "equations.kinematics",

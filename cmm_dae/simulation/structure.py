@@ -9,7 +9,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..description.mechanism import Mechanism
-from ..description.structure import SEARCH_BUDGET, Structure
+from ..description.structure import (  # noqa: F401 (the old path cmm_dae.structure's names)
+    MAX_GROUP,
+    SEARCH_BUDGET,
+    Group,
+    Structure,
+    configuration_label,
+    force_constraint_joints,
+    labeller,
+)
 from ..description.structure import structure as planar_structure
 from ..equations import rank
 from ..equations.model import Model
