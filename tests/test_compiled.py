@@ -46,7 +46,9 @@ EXAMPLES = [("andrews_squeezer", 0.03), ("cam_valve_train", 0.3), ("crank_pendul
             ("iftomm_a01_pendulum", 2.0), ("iftomm_a02_four_bar_N1", 2.0),
             ("motor_crank_stop", 4.0), ("nipper_cutting", 1.0), ("nipper_swing", 1.0),
             ("pendulum_stop", 2.0), ("slider_crank", 2.0), ("slider_crank_stop", 4.0),
-            ("slotted_link", 2.0), ("stick_slip_block", 3.0)]
+            ("slotted_link", 2.0), ("stick_slip_block", 3.0),
+            # spatial: a lock in a spherical five-bar, ball and universal joints, a ball joint
+            ("carton_fold", 1.0), ("rsur_four_bar", 1.0), ("spherical_pendulum", 2.0)]
 
 
 @pytest.mark.parametrize("name,t_end", EXAMPLES)

@@ -76,9 +76,14 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
     """Constraint force components and torque of one joint vs time (paper Figs. 18-19)."""
     r0 = results[0]
     plt = pyplot()
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    comps = [("force x [N]", lambda j: j.force[:, 0]), ("force y [N]", lambda j: j.force[:, 1]),
-             ("torque [N m]", lambda j: j.torque)]
+    if r0.layout.space == "spatial":  # 3-vectors in global axes, component by component
+        comps = [(f"{what} {x} [{unit}]", lambda j, w=what, k=k: getattr(j, w)[:, k])
+                 for what, unit in (("force", "N"), ("torque", "N m"))
+                 for k, x in enumerate("xyz")]
+    else:
+        comps = [("force x [N]", lambda j: j.force[:, 0]),
+                 ("force y [N]", lambda j: j.force[:, 1]), ("torque [N m]", lambda j: j.torque)]
+    fig, axes = plt.subplots(len(comps), 1, figsize=(8, 2.5 * len(comps)), sharex=True)
     # Components that are zero in exact arithmetic (a revolute joint's torque) are drawn as
     # zero, not as 1e-26 round-off blown up by the axis scaling.
     scale = max(float(np.max(np.abs(r.joint(joint).force), initial=0.0)) for r in results)

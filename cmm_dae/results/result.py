@@ -207,11 +207,14 @@ class Result:
     def watched_joints(self) -> list[str]:
         """The joints worth watching: metamorphic joints (limits: geometric constraints),
         joints with friction and sprung joints (force constraints, like the double-folded
-        mechanism's D); all joints when there are none of these."""
+        mechanism's D); all joints with a coordinate when there are none of these (a
+        spherical or universal joint has none)."""
         out = list(self.layout.metamorphic)
         out += [j for j in self.layout.frictional if j not in out]
         out += [j for j in self.layout.springs if j not in out]
-        return out or list(self.layout.joints)
+        lay = self.layout
+        return out or [j for j, ty in zip(lay.joints, lay.joint_types, strict=True)
+                       if ty not in ("spherical", "universal")] or list(lay.joints)
 
     def entered_configurations(self) -> list[int]:
         """Indices of the configurations the run was actually in, in order of first entry."""
