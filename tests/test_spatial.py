@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+import spatial_refs
 from scipy.spatial.transform import Rotation
 
 import cmm_dae as cd
@@ -19,41 +19,12 @@ HERE = Path(__file__).parent
 G = 9.81
 
 
-def _pendulum_reference(mech, t):
-    """The rod's unit direction u(t) (n, 3), its rate and acceleration from the spherical
-    pendulum's equations in (theta from the downward vertical, phi), with the pivot inertia
-    I0 + m L^2 (the bob's centroidal inertia is isotropic and it does not spin about the
-    rod, so the spin stays 0 and u obeys them; DOP853 at rtol 1e-13)."""
-    b = mech.bodies["bob"]
-    L, m, I0 = 0.5, b.mass, b.inertia[0]
-    k = m * G * L / (I0 + m * L**2)
-
-    def rhs(_, y):
-        th, ph, thd, phd = y
-        return [thd, phd, np.sin(th) * np.cos(th) * phd**2 - k * np.sin(th),
-                -2.0 * np.cos(th) / np.sin(th) * thd * phd]
-
-    a = np.arctan2(0.6, 0.8)  # the file's tilt, and its swing 3 rad/s across the rod
-    sol = solve_ivp(rhs, (0.0, t[-1]), [a, np.pi / 2, 0.0, 3.0 / np.sin(a)], t_eval=t,
-                    rtol=1e-13, atol=1e-13, method="DOP853")
-    th, ph, thd, phd = sol.y
-    acc = np.array([rhs(0.0, y)[2:] for y in sol.y.T]).T
-    u = np.column_stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), -np.cos(th)])
-    # u'' from (theta, phi) and their rates and accelerations, by the chain rule
-    s, c, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
-    thdd, phdd = acc
-    udd = np.column_stack([
-        -s * cp * (thd**2 + phd**2) + c * cp * thdd - s * sp * phdd - 2 * c * sp * thd * phd,
-        -s * sp * (thd**2 + phd**2) + c * sp * thdd + s * cp * phdd + 2 * c * cp * thd * phd,
-        c * thd**2 + s * thdd])
-    return L * u, L * udd
-
-
 def test_spherical_pendulum_follows_its_minimal_coordinate_equations():
     mech = cd.load(cd.example("spherical_pendulum"))
     res = cd.run_dae(mech, t_end=5.0, rtol=1e-10)
     assert res.status == "success"
-    r_ref, a_ref = _pendulum_reference(mech, res.t)
+    bob = mech.bodies["bob"]
+    r_ref, a_ref = spatial_refs.pendulum(bob.mass, bob.inertia[0], res.t)
     centroid = res.data["q"][:, :3]
     assert np.max(np.abs(centroid - r_ref)) < 1e-8  # m (measured 9e-10 over 10 s)
     # the pivot's force on the bob is m (a - g) (Newton for the centroid), its moment zero
@@ -84,11 +55,8 @@ def test_bennett_linkage_keeps_its_closed_form_relation_and_its_energy():
     mech = cd.load(cd.example("bennett_linkage"))
     res = cd.run_dae(mech, t_end=10.0, rtol=1e-10)
     assert res.status == "success" and not res.events
-    al, be = np.pi / 6, np.pi / 3
-    K = np.sin((be + al) / 2) / np.sin((be - al) / 2)
-    th1, th2 = res.joint("J1").position, res.joint("J2").position
-    # tan(th1/2) tan(th2/2) = K, written without the tangents' poles
-    rel = np.sin(th1 / 2) * np.sin(th2 / 2) - K * np.cos(th1 / 2) * np.cos(th2 / 2)
+    th1 = res.joint("J1").position
+    rel = spatial_refs.bennett(th1, res.joint("J2").position)
     assert np.max(np.abs(rel)) < 1e-10  # (measured 7e-12)
     assert np.ptp(th1) > 0.7  # it swings (1 -> 0.29 rad)
     assert np.max(np.abs(res.energy().residual)) < 1e-8  # J (measured 5e-10)
@@ -212,38 +180,14 @@ def test_spatial_keys_in_a_planar_file_are_refused(tmp_path):
         cd.load(path)
 
 
-def _nearest_root(base, dl, near):
-    """The root ``base +- dl`` of ``a cos x + b sin x = c`` nearest ``near`` (rad)."""
-    roots = np.array([base + dl, base - dl])
-    d = np.angle(np.exp(1j * (roots - near)))
-    return near + d[np.argmin(np.abs(d))]
-
-
 def test_rsur_four_bar_follows_its_closed_form_positions_and_energy():
     res = cd.run_dae(cd.load(cd.example("rsur_four_bar")), t_end=3.0, rtol=1e-10)
-    r1, r3, L = 0.03, 0.08, 0.14520499232974682
-    D = np.array([0.1, 0.0, 0.06])
     th, ph = res.joint("A").position, res.joint("D").position
-    # |B(th) - C(ph)| = L with B on the crank's circle, C on the rocker's about x
-    e = np.column_stack([r1 * np.cos(th), r1 * np.sin(th), 0 * th]) - D
-    a, b = 2 * r3 * e[:, 1], 2 * r3 * e[:, 2]
-    c = (e * e).sum(axis=1) + r3**2 - L**2
-    ref = [_nearest_root(np.arctan2(y, x), np.arccos(z / np.hypot(x, y)), p)
-           for x, y, z, p in zip(a, b, c, ph, strict=True)]
-    assert np.max(np.abs(np.angle(np.exp(1j * (np.array(ref) - ph))))) < 1e-9  # (4e-11)
+    ref = spatial_refs.rsur(th, ph)
+    assert np.max(np.abs(np.angle(np.exp(1j * (ref - ph))))) < 1e-9  # rad (4e-11)
     assert np.ptp(th) > 6.0 and np.ptp(ph) > 1.5  # the crank turns, the rocker rocks
     assert np.max(np.abs(res.energy().residual)) < 1e-8  # J (measured 7e-9)
     assert not res.layout.redundant and res.configurations[0].dof == 1
-
-
-def _rot_y(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def _rot_z(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
 def test_carton_fold_locks_into_a_spherical_four_bar():
@@ -258,21 +202,10 @@ def test_carton_fold_locks_into_a_spherical_four_bar():
     assert [c.dof for c in res.configurations] == [2, 1]
     tight = cd.run_dae(mech, t_end=0.2, rtol=1e-12)
     assert abs(tight.events[0].t - lock.t) < 1e-9  # s (rtol 1e-10 against 1e-12)
-    a1, b1, b2, a3, a4 = np.deg2rad([40, 35, 45, 60, 70])
-    z = np.array([0.0, 0.0, 1.0])
-    cos_arc = z @ _rot_y(b1) @ _rot_z(0.3) @ _rot_y(b2) @ z  # flap + coupler, E at its stop
-    u4, w0 = _rot_y(a4) @ z, _rot_y(a4) @ _rot_y(a3) @ z  # the output crease, its end at D = 0
     after = res.t > lock.t + 1e-9
-    errs = []
-    for th, ph in zip(res.joint("A").position[after], res.joint("D").position[after],
-                      strict=True):
-        u2 = _rot_z(th) @ _rot_y(a1) @ z
-        a = u2 @ (w0 - u4 * (u4 @ w0))
-        b = u2 @ np.cross(u4, w0)
-        c = cos_arc - (u2 @ u4) * (u4 @ w0)
-        ref = _nearest_root(np.arctan2(b, a), np.arccos(c / np.hypot(a, b)), ph)
-        errs.append(abs(ref - ph))
-    assert max(errs) < 1e-9  # rad (measured 1.2e-11)
+    ph = res.joint("D").position[after]
+    ref = spatial_refs.carton_locked(res.joint("A").position[after], ph)
+    assert np.max(np.abs(ref - ph)) < 1e-9  # rad (measured 1.2e-11)
     assert np.max(np.abs(res.energy().residual)) < 1e-8  # J, the lock's loss booked
 
 
