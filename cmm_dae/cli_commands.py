@@ -236,6 +236,10 @@ def _bench(args: argparse.Namespace) -> int:
         print(exudyn_table([compare_a02_exudyn(n, repeat=args.repeat) for n in args.loops])
               if exudyn_available() else
               "Exudyn is not installed (pip install 'cmm_dae[peers]'): no comparison with it")
+        from .studies.peers_bennett import bennett_table, compare_bennett
+
+        print()
+        print(bennett_table(compare_bennett(repeat=args.repeat)))
         return 0
     paths = [model_path(m) for m in args.models] or sorted(examples_dir().glob("*.toml"))
     print(table(bench_models(paths, t_end=args.t_end, rtol=args.rtol, dt=args.dt,

@@ -154,12 +154,19 @@ def header(peer: str = "MuJoCo") -> str:
 COLUMNS = header()
 
 
+def _step(h: float) -> str:
+    """A step (s) as the tables print it: one digit where that is exact (1e-02), else two
+    (2.5e-03, which one digit would round to 3e-03)."""
+    one = f"{h:.0e}"
+    return one if float(one) == h else f"{h:.1e}"
+
+
 def columns(row: dict, peer: str = "mujoco") -> str:
     """A comparison row's peer step and error (``row[peer + "_error"]``), cmm_dae's
     tolerance ("none" where none reached the peer's error) and error, and the time ratio,
     under :func:`header`."""
     rtol = f"{row['rtol']:.0e}" if row["rtol"] is not None else "none"
-    return (f"{row['h']:>8.0e}  {row[peer + '_error']:>10.2e}  {rtol:>12}  "
+    return (f"{_step(row['h']):>8}  {row[peer + '_error']:>10.2e}  {rtol:>12}  "
             f"{row['cmm_dae_error']:>11.2e}  {row['ratio']:>10.2f}")
 
 
