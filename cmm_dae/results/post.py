@@ -24,11 +24,44 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
     """Multipliers over every row (the dropped redundant ones included): the generalized
     force of the joint and driver rows, ``Phi_q^T lambda``, is what the equations
     determine; among the multipliers of all those rows that give it, the one of minimum
-    norm (a redundant set's reactions are not determined by rigid-body mechanics)."""
+    norm (a redundant set's reactions are not determined by rigid-body mechanics).
+
+    The kept rows' multipliers (zero on the dropped rows) are one solution; the minimum-norm
+    one is it less its part in the null space of ``B^T`` (B: every base row), whose basis
+    has one vector per dropped row, ``[-(B_k B_k^T)^-1 B_k B_d^T; I]`` orthonormalised: a
+    Cholesky solve of the kept rows' Gram matrix a sample, where a pseudo-inverse took an
+    SVD a sample (the Bennett linkage's 38 x 36: half of its run). Near a singular position,
+    where that Gram matrix is ill-conditioned, the pseudo-inverse is used."""
     n, nb = t.size, model.n_base
     B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
         1, 0, 2)
     nkeep = nb - len(model.dropped)
+    keep = np.array([i for i in range(nb) if i not in model.dropped], dtype=int)
+    drop = np.array(model.dropped, dtype=int)
+    x = np.zeros((n, nb))
+    x[:, keep] = lam[:, :nkeep]
+    Bk = B[:, keep, :]
+    gram = Bk @ Bk.transpose(0, 2, 1)
+    try:
+        L = np.linalg.cholesky(gram)
+        d = np.abs(np.diagonal(L, axis1=1, axis2=2))
+        if d.size and not np.min(d) > 1e-6 * np.max(d):
+            raise np.linalg.LinAlgError("ill-conditioned")  # (a singular position near)
+        Y = np.linalg.solve(gram, Bk @ B[:, drop, :].transpose(0, 2, 1))
+    except np.linalg.LinAlgError:
+        return _pinv_reactions(model, B, t, q, lam, P, nkeep)
+    N = np.zeros((n, nb, drop.size))
+    N[:, keep, :] = -Y
+    N[:, drop, np.arange(drop.size)] = 1.0
+    Qn, _ = np.linalg.qr(N)
+    x -= np.einsum("nrk,nk->nr", Qn, np.einsum("nrk,nr->nk", Qn, x))
+    return np.concatenate([x, lam[:, nkeep:]], axis=1)
+
+
+def _pinv_reactions(model: Model, B: np.ndarray, t: np.ndarray, q: np.ndarray,
+                    lam: np.ndarray, P: np.ndarray, nkeep: int) -> np.ndarray:
+    """:func:`_min_norm_reactions` by a pseudo-inverse a sample (any conditioning)."""
+    n = t.size
     Phi_q = np.asarray(model.mapped("phi_fn", n)(q.T, t, P.T)[1]).reshape(
         model.m, n, model.nq).transpose(1, 0, 2)
     G = np.einsum("nrk,nr->nk", Phi_q[:, :nkeep, :], lam[:, :nkeep])
