@@ -208,8 +208,9 @@ def _studies(sub) -> None:
                     help="also time chains of 8, 16 and 32 four-bar loops (growth with size)")
     bn.add_argument("--peers", action="store_true",
                     help="time cmm_dae against MuJoCo (extra 'peers') at equal accuracy on "
-                         "IFToMM A02 chains of --loops four-bar loops, 2 s, and on Andrews' "
-                         "squeezer, 0.03 s")
+                         "IFToMM A02 chains of --loops four-bar loops, 2 s, on Andrews' "
+                         "squeezer, 0.03 s, and (with Exudyn too) on the spatial Bennett "
+                         "linkage, 2 s")
     bn.add_argument("--loops", type=int, nargs="+", default=[1, 8, 32],
                     help="with --peers: loop counts (1 8 32)")
     bn.add_argument("--steps", type=float, nargs="+", default=[1e-5, 2e-6, 1e-6],

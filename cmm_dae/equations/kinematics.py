@@ -298,9 +298,9 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
     a parallelogram with a third crank, say): indices into ``model.all_rows``, found by a
     QR factorisation with column pivoting of the rows' Jacobian (transposed).
 
-    The rows of the joints that pin bodies to the ground are kept (they are independent
-    of each other: one joint per body): IDA integrates those bodies by their angle, which
-    needs both rows of the pin. The dependent rows are then picked among the others,
+    The rows of the joints that pin planar bodies to the ground are kept (they are
+    independent of each other: one joint per body): IDA integrates those bodies by their
+    angle, which needs both rows of the pin; so are a spatial body's own six rows. The dependent rows are then picked among the others,
     projected on what the pins leave free; their number is the whole set's rank deficit."""
     A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
     if A.shape[0] == 0:

@@ -29,7 +29,8 @@ class JointSeries:
     about the second body's connect point (CCW +), lock torque/force included, drivers,
     springs and dampers excluded; friction (n,) N m or N along +coordinate on the second
     body: kinetic friction while slipping, the force carried while stuck (zero for a joint
-    without friction).
+    without friction). In a spatial mechanism force and torque are (n, 3), global axes
+    (a spherical or universal joint's position is 0: it has no coordinate).
     """
 
     position: np.ndarray
@@ -87,7 +88,10 @@ class LoadSeries:
 
 @dataclass(frozen=True)
 class BodySeries:
-    """Pose (n, 3) x m, y m, theta rad of the body frame; velocity and acceleration alike."""
+    """Pose (n, 3) x m, y m, theta rad of the body frame; velocity and acceleration alike.
+    In a spatial mechanism pose is (n, 7): the frame's origin (m) and unit quaternion (w, x,
+    y, z); velocity and acceleration (n, 6): the origin's (m/s, m/s^2) and the angular
+    ones (rad/s, rad/s^2), global axes."""
 
     pose: np.ndarray
     velocity: np.ndarray
