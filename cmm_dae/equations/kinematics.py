@@ -300,7 +300,8 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
 
     The rows of the joints that pin planar bodies to the ground are kept (they are
     independent of each other: one joint per body): IDA integrates those bodies by their
-    angle, which needs both rows of the pin; so are a spatial body's own six rows. The dependent rows are then picked among the others,
+    angle, which needs both rows of the pin; so are a spatial body's own six rows. The
+    dependent rows are then picked among the others,
     projected on what the pins leave free; their number is the whole set's rank deficit."""
     A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
     if A.shape[0] == 0:
