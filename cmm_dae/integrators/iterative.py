@@ -21,50 +21,14 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..core.errors import ModelError, Problem, SolverError, Status
+from ..core.errors import SolverError, Status
 from ..core.records import Stats
-from ..equations import kkt, rank
+from ..equations import kkt
 from ..equations.codegen import Buffered
 from ..equations.model import Model
 from ..hybrid import policy as ev
-from . import cbuild, cstep
+from . import cbuild, coordinates, cstep
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
-
-
-def _free_coordinates(model: Model, hs: ev.HybridState, q: np.ndarray, t: float,
-                      prefer: list[str]) -> list[str]:
-    """Choose the differential variables: non-driven, unlocked joint coordinates that span
-    the free motion best (column-pivoted QR on their rates over the null space of the
-    active constraints), the user's [initial] choice first when it is well conditioned."""
-    J = model.constraints(q, t, hs.p).Phi_q[model.active_rows(hs.p)]
-    N = rank.null_space(J, model.nq)  # the free motions
-    dof = N.shape[1]
-    if dof == 0:
-        return []
-    C = model.joint_coords(q, np.zeros(model.nq)).c_q @ N
-    cand = [n for n in model.joint_names if n not in model.mech.drivers and n not in hs.locked]
-    pref = [n for n in prefer if n in cand]
-    if len(pref) == dof:
-        sub = C[[model.jidx[n] for n in pref]]
-        sv = np.linalg.svd(sub, compute_uv=False)
-        if sv[-1] > 1e-6 * max(1.0, sv[0]):
-            return pref
-    rows = C[[model.jidx[n] for n in cand]]
-    if rank.rank(rows) < dof if rows.size else True:
-        raise ModelError(Problem("joints", "", f"the fixed-step algorithm advances joint "
-                                 f"coordinates, and those of this mechanism span "
-                                 f"{rank.rank(rows) if rows.size else 0} of its {dof} free "
-                                 f"motions at t = {t:g} s (a spherical or universal joint's "
-                                 "rotation has none): use run_dae"), model.mech.source)
-    # greedy pivoting: pick the coordinate with the largest remaining rate component
-    chosen: list[int] = []
-    R = rows.copy()
-    for _ in range(dof):
-        k = int(np.argmax(np.linalg.norm(R, axis=1)))
-        chosen.append(k)
-        u = R[k] / np.linalg.norm(R[k])
-        R = R - np.outer(R @ u, u)
-    return [cand[k] for k in chosen]
 
 
 class _Stepper:
@@ -72,20 +36,24 @@ class _Stepper:
 
     def __init__(self, model: Model, hs: ev.HybridState, coords: list[str]):
         self.model, self.hs, self.coords = model, hs, coords
-        self.kidx = [model.jidx[n] for n in coords]
+        self.kidx = [coordinates.index(model, n) for n in coords]
         self.act = model.active_rows(hs.p)
+        #: natural coordinates: their system's condition number where chosen, and whether
+        #: it has grown a hundredfold since (they are chosen anew before they stop
+        #: spanning the motion: near that, Newton can land on another branch)
+        self.cond0, self.worn = np.inf, False
 
     def positions(self, q0: np.ndarray, t: float, targets: np.ndarray) -> np.ndarray:
         model, p = self.model, self.hs.p
         q = q0.copy()
         for _ in range(25):
-            con, c, c_q = model.kinematics(q, t, p)
+            con, c, c_q = coordinates.kinematics(model, q, t, p)
             r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
             if np.max(np.abs(r), initial=0.0) < 1e-13:
                 return q
             J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
             q = q - np.linalg.solve(J, r)
-        con, c, _ = model.kinematics(q, t, p)
+        con, c, _ = coordinates.kinematics(model, q, t, p)
         r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
         if np.max(np.abs(r), initial=0.0) > 1e-9:
             labels, ratio = ev.dependent_rows(model, q0, t, p, tol=1.0)
@@ -98,9 +66,13 @@ class _Stepper:
 
     def velocities(self, q: np.ndarray, t: float, rates: np.ndarray) -> np.ndarray:
         model, p = self.model, self.hs.p
-        con, _, c_q = model.kinematics(q, t, p)
+        con, _, c_q = coordinates.kinematics(model, q, t, p)
         J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
         rhs = np.concatenate([-con.Phi_t[self.act], rates])
+        if coordinates.natural(self.coords):  # how well they still span the motion
+            cond = float(np.linalg.cond(J))
+            self.cond0 = min(self.cond0, cond)
+            self.worn = not cond < 100.0 * self.cond0
         return np.linalg.solve(J, rhs)
 
 
@@ -113,7 +85,7 @@ class _CompiledStep:
     def __init__(self, model: Model, hs: ev.HybridState, coords: list[str],
                  triggers: list[ev.Trigger]):
         nq, m, npar = model.nq, model.m, model.n_params
-        kidx = [model.jidx[n] for n in coords]
+        kidx = [coordinates.index(model, n) for n in coords]
         act = [int(i) for i in model.active_rows(hs.p)]
         nk = len(kidx)
         schur = bool(np.all(model.mass > 0.0) and m > 0)
@@ -126,12 +98,13 @@ class _CompiledStep:
         S = ca.SX.sym
         q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
         h = tn - t
-        c, cd, cdd, _ = model.post_fn(q, v, a, t)
+        c, cd, cdd = coordinates.extend(model.post_fn(q, v, a, t)[:3], (q, v, a))
         pre = ca.Function("pre", [q, v, a, t, tn], [
             q + v * h, rows(c, kidx) + rows(cd, kidx) * h,  # the previous instant's rates
             rows(cd, kidx) + rows(cdd, kidx) * h])
         tar = S("tar", nk)
         phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
+        cz, c_q = coordinates.extend((cz, c_q), (q, ca.SX.eye(nq)))
         G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act),
                                                          rows(cz, kidx) - tar)])
         rates = S("rates", nk)
@@ -209,7 +182,7 @@ class IterativeIntegrator(Integrator):
         model, hs = self.model, self.hs
         key = tuple(sorted(hs.locked.items()))
         if key != self.key or self.st is None:  # a new configuration: choose its coordinates
-            self.coords = _free_coordinates(model, hs, q, t0, self.coords + self.prefer)
+            self.coords = coordinates.free(model, hs, q, t0, self.coords + self.prefer)
             self.st = _Stepper(model, hs, self.coords)
             self.key = key
         fast = self._compiled_step()
@@ -229,6 +202,7 @@ class IterativeIntegrator(Integrator):
         accelerations and multipliers the Python step solved."""
         model, hs, opts, st = self.model, self.hs, self.opts, self.st
         k, cfg, p = st.kidx, hs.current(), hs.p
+        again = False  # (natural coordinates chosen anew once for this step)
         while self.n < self.n_steps:
             if isinstance(fast, cstep.CStep):  # in C up to a step the loop below must see
                 n0 = self.n
@@ -249,7 +223,8 @@ class IterativeIntegrator(Integrator):
                 q_new, v_new, a_new, resid, values = fast(q, v, a, t, t_new, p)
             if fast is None or not resid < 1e-9:
                 c, cd = model.joint_rates(q, v)
-                cdd = model.joint_accelerations(q, v, a, t)
+                c, cd, cdd = coordinates.extend(
+                    (c, cd, model.joint_accelerations(q, v, a, t)), (q, v, a))
                 targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
                 rates = cd[k] + cdd[k] * h
                 try:  # (also where the compiled Newton failed: the dead-point report)
@@ -257,12 +232,23 @@ class IterativeIntegrator(Integrator):
                 except SolverError as e:
                     if e.status is not Status.DEAD_POINT:
                         raise
-                    self.n -= 1  # the step is not taken: the policy crosses from (t, q, v)
-                    return SegmentEnd(t, q, v, (), "singular")
+                    self.n -= 1  # the step is not taken
+                    if coordinates.natural(self.coords) and not again:
+                        # natural coordinates that no longer span the motion (a ball
+                        # joint's rotation turned away from them): chosen anew, here
+                        self.coords = coordinates.free(model, hs, q, t, [])
+                        st = self.st = _Stepper(model, hs, self.coords)
+                        k, again = st.kidx, True
+                        continue
+                    return SegmentEnd(t, q, v, (), "singular")  # the policy crosses
                 v_new, a_new, values = st.velocities(q_new, t_new, rates), None, None
             q, v = q_new, v_new
-            t = t_new
+            t, again = t_new, False
             self.stats.steps += 1
+            if st.worn:  # natural coordinates losing their span: chosen anew here
+                self.coords = coordinates.free(model, hs, q, t, [])
+                st = self.st = _Stepper(model, hs, self.coords)
+                k = st.kidx
             if opts.progress is not None:
                 opts.progress.update(t)
             # the Python step solves the KKT system at the new state once: for the event
@@ -299,6 +285,12 @@ class IterativeIntegrator(Integrator):
         machine; None with Python load laws or friction from the reaction (the Python
         step's KKT solves include it)."""
         model, hs = self.model, self.hs
+        if coordinates.natural(self.coords):  # chosen anew where they stop spanning the
+            if self.opts.compiled is True:  # motion, which the Python step sees
+                cbuild._warn_once("compiled fixed step not used (natural coordinates of a "
+                                  "spatial body among its coordinates): running the Python "
+                                  "step")
+            return None
         why = cbuild._unsupported(model)
         if why is not None:
             if self.opts.compiled is True:  # said as IDA's compiled segment says it
