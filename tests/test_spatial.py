@@ -283,3 +283,22 @@ def test_shipped_spatial_examples_run_ten_seconds_at_the_default_settings(name):
     assert res.status == "success" and res.t[-1] == 10.0
     assert np.max(np.abs(res.energy().residual)) < 5e-6  # J
     assert max(res.drift) < 1e-6
+
+
+def test_friction_from_the_reaction_on_a_spatial_hinge_as_in_the_plane(tmp_path):
+    """mu r |F| on a hinge, |F| the pin's whole force (its three point rows' multipliers):
+    a rod swinging about z comes to rest through the same slips as the planar file's."""
+    fric = "friction = { mu_static = 0.3, mu_kinetic = 0.2, radius = 0.02 }"
+    stop = "limits = { lower = -0.6 }"
+    planar = cd.example("pendulum_stop").read_text()
+    planar = planar.replace(planar[planar.index(stop):planar.index("[initial]")],
+                            fric + "\n\n")
+    spatial = (HERE / "models" / "pendulum_stop_spatial.toml").read_text().replace(
+        stop + "\nrestitution = 0.0", fric)
+    (tmp_path / "p.toml").write_text(planar)
+    (tmp_path / "s.toml").write_text(spatial)
+    a, b = _planar_vs_spatial(tmp_path / "p.toml", tmp_path / "s.toml", 3.0)
+    assert [e.kind for e in a.events] == [e.kind for e in b.events]
+    assert len(b.events) >= 4 and max(abs(x.t - y.t) for x, y in zip(a.events, b.events)) \
+        < 1e-8  # s
+    assert np.max(np.abs(b.joint("O").friction - a.joint("O").friction)) < 1e-9  # N m

@@ -211,9 +211,6 @@ def _joint_problems(m: Any, name: str, j: Any) -> list[Problem]:
                                "(-pi, pi] from its reference: limits inside it"))
     if j.friction is not None:
         out += _friction_problems(t, j)
-        if j.friction.from_reaction:
-            out.append(Problem(t, "friction", "friction from the reaction is planar only "
-                               "so far: give constant levels (static, kinetic)"))
     if j.curve is not None or j.unilateral:
         out.append(Problem(t, "curve", "contacts are planar only so far"))
     return out

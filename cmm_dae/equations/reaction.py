@@ -4,9 +4,10 @@ On a revolute joint the level is ``mu * radius * |F|`` (F the pin's reaction for
 prismatic joint ``mu * |N|`` (N the guide's normal reaction), on a (bilateral) contact
 joint ``mu * |N|`` (N the contact force), each added to the joint's constant level. The
 reaction is a combination of the joint's multipliers: a revolute joint's two rows hold its
-two points together in global x and y, so their multipliers are the force itself; a
-prismatic joint's second row holds the point on the guide's normal, so its multiplier is
-the normal force; a contact's one row is the point's distance from its curve, so its
+two points together in global x and y, so their multipliers are the force itself (a
+spatial one's first three rows, in x, y and z); a prismatic joint's second row holds the
+point on the guide's normal, so its multiplier is the normal force (a spatial one's first
+two rows, along two normals); a contact's one row is the point's distance from its curve, so its
 multiplier is the contact force. The friction a slipping joint feels
 therefore depends on the multipliers it helps determine, and the KKT system becomes
 nonlinear: :func:`solve` corrects a linear solve by Newton's method, so that the reaction
@@ -48,6 +49,8 @@ def _rows(model: Any, joint: str) -> list[int]:
     rows = model.rows_of("joint", joint)
     if len(rows) != j.rows:  # (the model refuses this when it is built)
         raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not {j.rows}")
+    if j.spatial:  # the point rows: a hinge's three (its pin's whole force, global axes),
+        return rows[:3] if j.type == "revolute" else rows[:2]  # a guide's two normal ones
     return rows[1:] if j.type == "prismatic" else rows
 
 
