@@ -93,3 +93,27 @@ def carton_locked(th: np.ndarray, near: np.ndarray, stop: float = 0.3) -> np.nda
         out.append(nearest_root(u2 @ (w0 - u4 * (u4 @ w0)), u2 @ np.cross(u4, w0),
                                 cos_arc - (u2 @ u4) * (u4 @ w0), p))
     return np.array(out)
+
+
+def collar_bounces(n: int, s0: float = 0.1, v0: float = -0.5, stop: float = 0.05,
+                   e: float = 0.5, k: float = 200.0, m: float = 0.5, rest: float = 0.1
+                   ) -> list[tuple[float, float]]:
+    """The first ``n`` impacts (time s, speed before m/s) of ``collar_on_shaft.toml``'s
+    slide: between impacts the harmonic oscillation about the spring's equilibrium under
+    gravity, in closed form, its arrival at the stop found by brentq; each impact sends it
+    back at e times its speed."""
+    from scipy.optimize import brentq
+
+    w, eq = (k / m) ** 0.5, rest - m * G / k
+    out, t, s, v = [], 0.0, s0, v0
+    for _ in range(n):
+        def pos(tau, s=s, v=v):
+            return eq + (s - eq) * np.cos(w * tau) + v / w * np.sin(w * tau) - stop
+        taus = np.linspace(1e-9, 2 * np.pi / w, 2001)
+        f = pos(taus)
+        i = int(np.flatnonzero((f[:-1] > 0) & (f[1:] <= 0))[0])
+        tau = brentq(pos, taus[i], taus[i + 1], xtol=1e-15, rtol=1e-15)
+        vin = -(s - eq) * w * np.sin(w * tau) + v * np.cos(w * tau)
+        t, s, v = t + tau, stop, -e * vin
+        out.append((t, vin))
+    return out

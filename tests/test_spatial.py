@@ -302,3 +302,22 @@ def test_friction_from_the_reaction_on_a_spatial_hinge_as_in_the_plane(tmp_path)
     gaps = [abs(x.t - y.t) for x, y in zip(a.events, b.events, strict=True)]
     assert len(gaps) >= 4 and max(gaps) < 1e-8  # s
     assert np.max(np.abs(b.joint("O").friction - a.joint("O").friction)) < 1e-9  # N m
+
+
+def test_cylindrical_joint_slides_and_turns_in_closed_form():
+    """The collar's slide (the joint S:slide: a spring, gravity, a stop with restitution
+    0.5) bounces when the closed-form oscillation says, and its angle turns on at 3 rad/s
+    through the impacts (nothing acts about the shaft)."""
+    mech = cd.load(cd.example("collar_on_shaft"))
+    assert list(mech.joints) == ["S", "S:slide"] and mech.joints["S"].rows == 4
+    res = cd.run_dae(mech, 1.0, rtol=1e-10)
+    ref = spatial_refs.collar_bounces(4)
+    assert [e.kind for e in res.events] == ["bounce"] * 4
+    for ev, (t, vin) in zip(res.events, ref, strict=True):
+        assert ev.joint == "S:slide" and abs(ev.t - t) < 1e-8  # s
+        assert abs(ev.velocity_before - vin) < 1e-7  # m/s
+        assert abs(ev.velocity_after + 0.5 * vin) < 1e-7
+    theta = res.joint("S").position
+    assert np.max(np.abs(np.angle(np.exp(1j * (theta - 3.0 * res.t))))) < 1e-8  # rad
+    assert np.max(np.abs(res.energy().residual)) < 1e-8  # J, the impacts' losses booked
+    assert cd.structure(mech).mobility == 2

@@ -96,12 +96,12 @@ def _friction_problems(t: str, j) -> list[Problem]:
     if not (_finite(ms) and _finite(mk) and ms >= mk >= 0):
         out.append(Problem(t, "friction", f"expected mu_static >= mu_kinetic >= 0, got "
                            f"mu_static = {ms}, mu_kinetic = {mk}"))
-    elif j.type == "revolute" and f.from_reaction and not (_finite(f.radius)
-                                                            and f.radius > 0):
+    elif j.type in ("revolute", "cylindrical") and f.from_reaction and not (
+            _finite(f.radius) and f.radius > 0):
         out.append(Problem(t, "friction.radius", "expected the pin radius > 0 (m): a "
                            "revolute joint's friction from its reaction is mu radius |F|, "
                            f"got radius = {f.radius}"))
-    if j.type != "revolute" and f.radius != 0.0:
+    if j.type not in ("revolute", "cylindrical") and f.radius != 0.0:
         out.append(Problem(t, "friction.radius", f"a {j.type} joint's friction from its "
                            "reaction is mu |N|: it has no radius"))
     return out

@@ -20,6 +20,7 @@ from .higher_pairs import contact_keys, is_gear, read_gear
 from .mechanism import (
     LAWS,
     MOTIONS,
+    SLIDE_OF,
     Body,
     Damper,
     Driver,
@@ -39,7 +40,7 @@ from .reader import Reader as _Reader
 from .reader import short as _short
 from .schema import SPEC, default, keys_of
 from .spatial import SPATIAL_TYPES
-from .spatial_reader import GRAVITY, read_axes, read_body, read_joint_axes
+from .spatial_reader import GRAVITY, read_axes, read_body, read_joint_axes, slides
 
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
 MAX_FILE_BYTES = 16 * 2**20
@@ -135,6 +136,7 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
               for k, v in r.sub("", data, "bodies").items()]
     jt = r.sub("", data, "joints")
     joints = [_joint(r, k, v, spatial) for k, v in jt.items() if not is_gear(v)]
+    joints += [_joint(r, SLIDE_OF.format(k), s, spatial) for k, s in slides(r, jt, spatial)]
     gears = [read_gear(r, k, v) for k, v in jt.items() if is_gear(v)]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
     loads = [_load(r, k, v, dim) for k, v in r.sub("", data, "loads").items()]
@@ -212,11 +214,13 @@ def _joint(r: _Reader, name: str, d: Any, spatial: bool = False) -> Joint:
     d = r.keys(t, d, JOINT_KEYS)
     jtype = r.string(t, d, "type")
     types = SPATIAL_TYPES if spatial else JOINT_TYPES
-    if jtype and jtype not in types:
+    if jtype and jtype not in types and not (spatial and name.endswith(":slide")):
         r.bad(t, "type", f"expected one of {', '.join(map(repr, types))}, got {jtype!r}")
     first, second = _connects(r, t, d)
     curve, side, unilateral = contact_keys(r, t, d, jtype, spatial)
     axes = reference = None
+    if "slide" in d and jtype != "cylindrical":
+        r.bad(t, "slide", "only a spatial cylindrical joint has a slide")
     if spatial:
         axes, reference = read_joint_axes(r, t, d, jtype)
         axis, angle = default("joints", "axis"), 0.0

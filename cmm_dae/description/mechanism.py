@@ -27,8 +27,8 @@ __all__ = [
 
 
 #: joint types of spatial mechanisms only, and each spatial type's constraint rows
-SPATIAL_ONLY = ("spherical", "universal", "cylindrical")
-SPATIAL_ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4,
+SPATIAL_ONLY = ("spherical", "universal", "cylindrical", "slide")
+SPATIAL_ROWS = {"revolute": 5, "prismatic": 5, "cylindrical": 4, "universal": 4, "slide": 0,
                 "spherical": 3}
 
 @dataclass(frozen=True)
@@ -279,7 +279,7 @@ class Mechanism:
             return _frozen(out)
 
         object.__setattr__(self, "bodies", as_map(self.bodies, "name", "bodies"))
-        object.__setattr__(self, "joints", as_map(self.joints, "name", "joints"))
+        object.__setattr__(self, "joints", _with_slides(as_map(self.joints, "name", "joints")))
         object.__setattr__(self, "drivers", as_map(self.drivers, "joint", "drivers"))
         object.__setattr__(self, "loads", as_map(self.loads, "name", "loads"))
         object.__setattr__(self, "elements", as_map(self.elements, "name", "elements"))
@@ -345,6 +345,29 @@ class Mechanism:
     def spatial(self) -> bool:
         """Whether the mechanism is spatial (``space == "spatial"``)."""
         return self.space == "spatial"
+
+
+#: the name of a cylindrical joint's slide, the joint of its second coordinate
+SLIDE_OF = "{}:slide"
+
+
+def _with_slides(joints: MappingProxyType) -> MappingProxyType:
+    """The joints, with the slide of each cylindrical joint that has none (a cylindrical
+    joint J has two coordinates: its angle, J's own, and its displacement along the axis,
+    that of the joint ``J:slide`` of type "slide", which holds no row of its own and takes
+    limits, a spring, a damper, friction, a driver and loads as any joint)."""
+    missing = {SLIDE_OF.format(n): Joint(SLIDE_OF.format(n), "slide", j.first, j.second,
+                                         axes=j.axes, reference=j.reference)
+               for n, j in joints.items()
+               if j.type == "cylindrical" and SLIDE_OF.format(n) not in joints}
+    if not missing:
+        return joints
+    out: dict = {}
+    for n, j in joints.items():  # each slide just after its joint
+        out[n] = j
+        if SLIDE_OF.format(n) in missing:
+            out[SLIDE_OF.format(n)] = missing[SLIDE_OF.format(n)]
+    return _frozen(out)
 
 
 def require_mechanism(obj: object, caller: str) -> None:

@@ -24,9 +24,10 @@ __all__ = ["SPACES", "SPATIAL_TYPES", "principal", "problems", "quaternion", "ro
 #: the values of ``[mechanism] space``
 SPACES = ("planar", "spatial")
 #: joint types of a spatial mechanism
-SPATIAL_TYPES = ("revolute", "prismatic", "spherical", "universal")
-#: joint types with a coordinate (limits, springs, dampers, friction, drivers, loads)
-WITH_COORDINATE = ("revolute", "prismatic")
+SPATIAL_TYPES = ("revolute", "prismatic", "cylindrical", "spherical", "universal")
+#: joint types with a coordinate (limits, springs, dampers, friction, drivers, loads): a
+#: cylindrical joint's angle, its slide's displacement (the joint "J:slide")
+WITH_COORDINATE = ("revolute", "prismatic", "cylindrical", "slide")
 #: the smallest principal moment's share of the largest a body may have, and the smallest
 #: share of the tensor's trace each pseudo-inertia (I2 + I3 - I1) / 2 may have: below, the
 #: rotation about that axis has no inertia to speak of (a thin rod about its own axis) and
@@ -162,6 +163,13 @@ def _axis_ref(m: Any, t: str, key: str, ref: Any, out: list[Problem]) -> np.ndar
 
 def _joint_problems(m: Any, name: str, j: Any) -> list[Problem]:
     t, out = f"joints.{name}", []
+    if j.type == "slide":
+        base = m.joints.get(name[:-len(":slide")]) if name.endswith(":slide") else None
+        if base is None or base.type != "cylindrical" or (base.first, base.second) != \
+                (j.first, j.second):
+            return [Problem(t, "type", "a slide is the second coordinate of a cylindrical "
+                            "joint J, the joint 'J:slide' with J's connects")]
+        return _coordinate_problems(t, j)
     if j.type not in SPATIAL_TYPES:
         why = " (a planar higher pair: not yet in space)" if j.type in ("contact", "gear") \
             else ""
@@ -192,6 +200,12 @@ def _joint_problems(m: Any, name: str, j: Any) -> list[Problem]:
             out += _arms_problems(m, t, bodies, dirs)
         else:
             out += _reference_problems(m, t, j, bodies, dirs)
+    return out + _coordinate_problems(t, j)
+
+
+def _coordinate_problems(t: str, j: Any) -> list[Problem]:
+    """The parts on a joint's coordinate: none without one; ordered limits."""
+    out: list[Problem] = []
     if j.type not in WITH_COORDINATE:
         for key in ("limits", "spring", "damper", "friction"):
             if getattr(j, key) is not None:
@@ -205,8 +219,8 @@ def _joint_problems(m: Any, name: str, j: Any) -> list[Problem]:
             out.append(Problem(t, "limits", "give 'lower', 'upper' or both"))
         if lo is not None and up is not None and not lo < up:
             out.append(Problem(t, "limits", f"lower ({lo}) must be below upper ({up})"))
-        if j.type == "revolute" and any(x is not None and not -math.pi < x < math.pi
-                                        for x in (lo, up)):
+        if j.type in ("revolute", "cylindrical") and any(
+                x is not None and not -math.pi < x < math.pi for x in (lo, up)):
             out.append(Problem(t, "limits", "a spatial revolute joint's coordinate lies in "
                                "(-pi, pi] from its reference: limits inside it"))
     if j.friction is not None:

@@ -11,7 +11,7 @@ from typing import Any
 from .mechanism import Body
 from .schema import keys_of
 
-__all__ = ["read_axes", "read_body", "read_joint_axes"]
+__all__ = ["read_axes", "read_body", "read_joint_axes", "slides"]
 
 #: the default gravity of a spatial mechanism, m/s^2 (z up)
 GRAVITY = (0.0, 0.0, -9.81)
@@ -77,3 +77,21 @@ def read_joint_axes(r: Any, t: str, d: dict, jtype: str
         r.bad(t, "axes", "only a universal joint has 'axes' (its arms); this joint's is "
               "'axis'")
     return _names2(r, t, d, "axis", "axis"), _names2(r, t, d, "reference", "axis")
+
+
+#: what a cylindrical joint's ``slide`` table may hold: its second coordinate's parts
+SLIDE_KEYS = ("limits", "restitution", "spring", "damper", "friction")
+
+
+def slides(r: Any, joints: dict, spatial: bool) -> list[tuple[str, dict]]:
+    """(joint, table) for the slide of each cylindrical joint: its ``slide`` sub-table's
+    parts, with the joint's own connects and axes (read as a joint of type "slide")."""
+    out = []
+    for name, d in joints.items() if spatial else ():
+        if not isinstance(d, dict) or d.get("type") != "cylindrical":
+            continue
+        sub = r.keys(f"joints.{name}.slide", r.sub(f"joints.{name}", d, "slide"), SLIDE_KEYS)
+        out.append((name, {"type": "slide", **{k: d[k] for k in ("connects", "axis",
+                                                                   "reference") if k in d},
+                           **sub}))
+    return out

@@ -100,3 +100,84 @@ _DRIVER_VALUES: dict[str, Key] = {
     "values": Key("numbers", "table: coordinates at `times`, joined by a C2 cubic spline "
                   "with clamped ends", _COORD),
 }
+
+
+def _json(k: Key) -> dict:
+    num = {"type": "number"}
+    s: dict[str, Any]
+    if k.kind == "number":
+        s = dict(num)
+        if k.minimum is not None:
+            s["minimum"] = k.minimum
+    elif k.kind == "string":
+        s = {"type": "string"}
+    elif k.kind == "boolean":
+        s = {"type": "boolean"}
+    elif k.kind == "choice":
+        s = {"type": "string", "enum": list(k.choices)}
+    elif k.kind in ("vector2", "vector3"):
+        n = int(k.kind[-1])
+        s = {"type": "array", "items": num, "minItems": n, "maxItems": n}
+    elif k.kind == "vector23":
+        s = {"type": "array", "items": num, "minItems": 2, "maxItems": 3}
+    elif k.kind == "inertia":
+        s = {"oneOf": [{"type": "number", "minimum": 0.0},
+                       {"type": "array", "items": num, "minItems": 3, "maxItems": 3},
+                       {"type": "array", "items": num, "minItems": 6, "maxItems": 6}]}
+    elif k.kind == "axis":
+        s = {"oneOf": [_json(Key("vector2", "")), _json(Key("strings2", ""))]}
+    elif k.kind == "guess":
+        s = {"oneOf": [_json(Key("vector3", "")), {
+            "type": "object", "additionalProperties": False,
+            "properties": {k: _json(Key("vector3", "")) for k in (
+                "position", "rotation", "velocity", "angular_velocity")}}]}
+    elif k.kind == "numbers":
+        s = {"type": "array", "items": num}
+    elif k.kind == "points":
+        s = {"type": "array", "items": {"type": "array", "items": num, "minItems": 2,
+                                        "maxItems": 2}}
+    elif k.kind == "strings2":
+        s = {"type": "array", "items": {"type": "string"}, "minItems": 2, "maxItems": 2}
+    elif k.kind == "pair":
+        s = {"type": "array", "items": {"type": "string", "pattern": r"^[^.]+\..+$"},
+             "minItems": 2, "maxItems": 2}
+    elif k.kind == "paths":
+        s = {"oneOf": [{"const": "position"},
+                       {"type": "array", "items": {"type": "string"}}]}
+    elif k.kind == "table":
+        s = _object(k.keys)
+    elif k.kind == "map":
+        s = {"type": "object", "additionalProperties": _json(Key(k.of, ""))}
+    else:  # pragma: no cover - a programming error in SPEC
+        raise ValueError(k.kind)
+    desc = k.doc + (f" [{k.unit}]" if k.unit else "")
+    s["description"] = desc
+    if k.default is not REQUIRED and k.default is not None and k.kind != "string":
+        s["default"] = k.default
+    return s
+
+
+def _object(keys: dict[str, Key], only: tuple[str, ...] | None = None) -> dict:
+    names = [n for n in keys if only is None or n in only]
+    return {"type": "object", "properties": {n: _json(keys[n]) for n in names},
+            "required": [n for n in names if keys[n].default is REQUIRED],
+            "additionalProperties": False}
+
+
+def _table_json(t: Table) -> dict:
+    if t.variants is None:
+        entry = _object(t.keys)
+    else:
+        # Each value of the discriminating key admits the common keys plus its own.
+        disc, extra = t.variants
+        own = {k for ks in extra.values() for k in ks}
+        common = tuple(k for k in t.keys if k not in own)
+        entry = {"type": "object", "required": [disc], "oneOf": []}
+        for value, ks in extra.items():
+            o = _object(t.keys, common + ks)
+            o["properties"][disc] = {"const": value}
+            entry["oneOf"].append(o)
+    entry["description"] = t.doc
+    if t.named:
+        return {"type": "object", "description": t.doc, "additionalProperties": entry}
+    return entry

@@ -49,6 +49,8 @@ def _rows(model: Any, joint: str) -> list[int]:
     rows = model.rows_of("joint", joint)
     if len(rows) != j.rows:  # (the model refuses this when it is built)
         raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not {j.rows}")
+    if j.type == "slide":  # a cylindrical joint's slide: its joint's normal rows
+        return model.rows_of("joint", joint[:-len(":slide")])[:2]
     if j.spatial:  # the point rows: a hinge's three (its pin's whole force, global axes),
         return rows[:3] if j.type == "revolute" else rows[:2]  # a guide's two normal ones
     return rows[1:] if j.type == "prismatic" else rows
@@ -67,7 +69,7 @@ def arm(model: Any, joint: str, friction: Any = None) -> Any:
     """What mu multiplies besides the reaction: the pin's radius on a revolute joint (m),
     1 on a prismatic or contact one. ``friction`` (default the joint's) may hold symbols."""
     f = model.joints[joint].friction if friction is None else friction
-    return f.radius if model.joints[joint].type == "revolute" else 1.0
+    return f.radius if model.joints[joint].type in ("revolute", "cylindrical") else 1.0
 
 
 def growth(model: Any, joint: str, lam: Any, kind: str, friction: Any = None) -> Any:

@@ -125,9 +125,9 @@ def _frame(geo: Geometry, j, mech):
 
 
 def joint_rows(geo: Geometry, j, mech) -> tuple[ca.SX, list, tuple | None]:
-    """A spatial joint's coordinate (0 without one), its rows, and for a revolute joint
-    ``(s, c)``: the sine and cosine of its angle (its driver's row is written in them, so
-    a driven joint may turn any number of times)."""
+    """A spatial joint's coordinate (0 without one), its rows, and for a revolute or
+    cylindrical joint ``(s, c)``: the sine and cosine of its angle (its driver's row is
+    written in them, so a driven joint may turn any number of times)."""
     d = geo.point(j.second) - geo.point(j.first)
     if j.type == "spherical":
         return ca.SX(0), [d[0], d[1], d[2]], None
@@ -136,10 +136,14 @@ def joint_rows(geo: Geometry, j, mech) -> tuple[ca.SX, list, tuple | None]:
         u2 = geo.direction(j.second_body, geo.axis(j.axes[1]))
         return ca.SX(0), [d[0], d[1], d[2], ca.dot(u1, u2)], None
     a1, n1, n2, a2, r1, r2 = _frame(geo, j, mech)
+    if j.type == "slide":  # a cylindrical joint's second coordinate: no row of its own
+        return ca.dot(a1, d), [], None
     align = [ca.dot(a2, n1), ca.dot(a2, n2)]
     s, c = ca.dot(a1, ca.cross(r1, r2)), ca.dot(r1, r2)
     if j.type == "revolute":
         return ca.atan2(s, c), [d[0], d[1], d[2], *align], (s, c)
+    if j.type == "cylindrical":  # the second point on the first's axis, the axes aligned
+        return ca.atan2(s, c), [ca.dot(d, n1), ca.dot(d, n2), *align], (s, c)
     # prismatic: the second point on the first's axis, the axes aligned, no roll
     return ca.dot(a1, d), [ca.dot(d, n1), ca.dot(d, n2), *align, s], None
 
