@@ -87,14 +87,14 @@ def test_a_follower_that_falls_through_a_cam_within_one_step_lands():
     out again at the end of one step, where a gap read +1 (armed only while approaching).
     Only an output time inside that step had caught the landing (8 events over 2 s on
     IDA's own steps, the follower 21 mm inside the cam). Now it lands whatever the grid:
-    58 events on the 1e-3 grid (whose lift-offs and landings test_contact checks against
-    the profile to 1e-8 s) and on IDA's own steps, both paths, the same to the last bit
-    on one path."""
+    29 events in 1 s on the 1e-3 grid (whose lift-offs and landings test_contact checks
+    against the profile to 1e-8 s) and on IDA's own steps, the same to the last bit. (On
+    the Python path: the C path gives its events bit for bit, test_compiled; building
+    this cam's library took 20 of this test's 70 s.)"""
     mech = spline_cam()
-    for c in (True, False):
-        grid, own = (cd.simulate(mech, 2.0, rtol=1e-10, output_dt=dt, compiled=c)
-                     for dt in (1e-3, None))
-        assert len(grid.events) == 58
-        assert [(e.kind, e.t) for e in own.events] == [(e.kind, e.t) for e in grid.events]
-        for r in (grid, own):  # never inside the cam beyond the tolerance
-            assert np.min(r.joint("K").position) >= -1e-9
+    grid, own = (cd.simulate(mech, 1.0, rtol=1e-10, output_dt=dt, compiled=False)
+                 for dt in (1e-3, None))
+    assert len(grid.events) == 29
+    assert [(e.kind, e.t) for e in own.events] == [(e.kind, e.t) for e in grid.events]
+    for r in (grid, own):  # never inside the cam beyond the tolerance
+        assert np.min(r.joint("K").position) >= -1e-9
