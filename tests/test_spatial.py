@@ -321,3 +321,43 @@ def test_cylindrical_joint_slides_and_turns_in_closed_form():
     assert np.max(np.abs(np.angle(np.exp(1j * (theta - 3.0 * res.t))))) < 1e-8  # rad
     assert np.max(np.abs(res.energy().residual)) < 1e-8  # J, the impacts' losses booked
     assert cd.structure(mech).mobility == 2
+
+
+def test_more_bad_spatial_input_is_named_once(tmp_path):
+    text = (HERE / "models" / "pendulum_stop_spatial.toml").read_text()
+    cases = {  # (what is replaced, by what, the one problem said)
+        "space": ('space = "spatial"', 'space = "3d"',
+                  "[mechanism] space: expected one of planar, spatial, got '3d'"),
+        "point": ("O = [0.0, 0.0, 0.0] }", "O = [0.0, 0.0] }",
+                  "[ground.points] O: expected a list of 3 numbers"),
+        "rest": ("limits = { lower = -0.6 }\nrestitution = 0.0",
+                 "spring = { stiffness = 1.0, rest = 4.0 }",
+                 "[joints.O] spring.rest: a spatial revolute joint's coordinate lies in"),
+    }
+    for old, new, said in cases.values():
+        assert old in text
+        (tmp_path / "bad.toml").write_text(text.replace(old, new, 1))
+        with pytest.raises(ModelError) as err:
+            cd.load(tmp_path / "bad.toml")
+        assert len(err.value.problems) == 1 and said in str(err.value)
+
+
+def test_sensitivity_to_a_full_tensors_entry_is_refused_by_name(tmp_path):
+    text = (HERE / "models" / "pendulum_stop_spatial.toml").read_text().replace(
+        "inertia = [1.0e-5, 3.0e-3, 3.0e-3]", "inertia = [1.0e-3, 3.0e-3, 3.0e-3, 0, 0, 1e-4]")
+    (tmp_path / "full.toml").write_text(text)
+    with pytest.raises(ModelError, match=r"bodies.rod.inertia.xy: an entry of a full"):
+        cd.sensitivities(cd.load(tmp_path / "full.toml"), ["bodies.rod.inertia.xy"], 0.1)
+
+
+def test_a_loop_that_cannot_close_in_space_reports_its_residual(tmp_path):
+    """A universal joint whose arms can never be perpendicular: the assembly's residual,
+    not a diverged Newton's (it said 8.6e33)."""
+    text = cd.example("rsur_four_bar").read_text().replace(  # the coupler's length across
+        'axes = ["coupler.y", "rocker.z"]', 'axes = ["coupler.x", "rocker.z"]').replace(
+        "axes = { y = [0.0, 1.0, 0.0] }", "axes = { y = [0.0, 1.0, 0.0], x = [1.0, 0.0, 0.0] }")
+    # (the global x axis, the rocker's: the coupler always runs 0.07 m or more along it)
+    (tmp_path / "u.toml").write_text(text)
+    with pytest.raises(cd.AssemblyError) as err:
+        cd.run_dae(cd.load(tmp_path / "u.toml"), 0.1)
+    assert 0.0 < err.value.residual < 1.0 and "joint C" in str(err.value)

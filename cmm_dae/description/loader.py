@@ -39,7 +39,7 @@ from .mechanism import (
 from .reader import Reader as _Reader
 from .reader import short as _short
 from .schema import SPEC, default, keys_of
-from .spatial import SPATIAL_TYPES
+from .spatial import SPACES, SPATIAL_TYPES
 from .spatial_reader import GRAVITY, read_axes, read_body, read_joint_axes, slides
 
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
@@ -121,7 +121,9 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     r.keys("", data, TOP_KEYS)
     mech = r.keys("mechanism", r.sub("", data, "mechanism"), MECH_KEYS)
     name = r.string("mechanism", mech, "name", default=Path(source).stem if source else "mechanism")
-    space = r.string("mechanism", mech, "space", default="planar")  # (checked by validate)
+    space = r.choice("mechanism", mech, "space", SPACES) if "space" in mech else "planar"
+    if space is None:  # every point would be read with the wrong number of coordinates
+        raise ModelError(r.problems, source)
     spatial, dim = space == "spatial", 3 if space == "spatial" else 2
     gravity = r.vec("mechanism", mech, "gravity", dim, default=GRAVITY if spatial
                     else default("mechanism", "gravity"))
@@ -167,7 +169,8 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
                       elements=elements, gears=gears, space=space, axes=gaxes, check=False)
         seen = {(p.table, p.key.split("[")[0]) for p in problems}
         problems += [p for p in validate(m) if (p.table, p.key) not in seen
-                     and (p.table, p.key.split(".")[0]) not in seen]
+                     and (p.table, p.key.split(".")[0]) not in seen
+                     and not (problems and "nan" in p.message)]  # (a NaN put in above)
     except Exception as e:  # pragma: no cover - defensive: never a deep traceback on bad input
         problems.append(Problem("", "", f"could not build the mechanism: {e}"))
     if problems:

@@ -145,7 +145,8 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
             f"point '{ref}'")
     if _tensor_entry(mech, parts) is not None:
         return None
-    if mech.spatial and parts[:1] == ["bodies"] and parts[2:3] == ["inertia"]:
+    if mech.spatial and parts[:1] == ["bodies"] and parts[2:3] == ["inertia"] \
+            and parts[1] in mech.bodies:
         return Problem("parameters", path, "a spatial body's inertia is a tensor: name one "
                        "entry, bodies.NAME.inertia.xx|yy|zz (principal moments) or "
                        ".xy|xz|yz (products, where six are given)")

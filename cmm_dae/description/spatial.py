@@ -223,6 +223,11 @@ def _coordinate_problems(t: str, j: Any) -> list[Problem]:
                 x is not None and not -math.pi < x < math.pi for x in (lo, up)):
             out.append(Problem(t, "limits", "a spatial revolute joint's coordinate lies in "
                                "(-pi, pi] from its reference: limits inside it"))
+    if j.spring is not None and j.type in ("revolute", "cylindrical") \
+            and isinstance(j.spring.rest, float) and not -math.pi < j.spring.rest < math.pi:
+        out.append(Problem(t, "spring.rest", "a spatial revolute joint's coordinate lies in "
+                           f"(-pi, pi] from its reference: a rest inside it, got "
+                           f"{j.spring.rest}"))
     if j.friction is not None:
         out += _friction_problems(t, j)
     if j.curve is not None or j.unilateral:

@@ -105,8 +105,9 @@ def _solve_positions(model: Model, t: float, p: np.ndarray, known: dict[str, flo
 
     q = np.array(q_guess, float)
     r, J = fun(q)
-    if np.max(np.abs(r), initial=0.0) > 1e-6 and n_eq >= model.nq:
-        sol = least_squares(lambda x: fun(x)[0], q, jac=lambda x: fun(x)[1], method="lm",
+    if np.max(np.abs(r), initial=0.0) > 1e-6:  # (fewer rows than coordinates: "trf")
+        sol = least_squares(lambda x: fun(x)[0], q, jac=lambda x: fun(x)[1],
+                            method="lm" if n_eq >= model.nq else "trf",
                             xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
         q = sol.x
     for _ in range(20 if n_eq >= model.nq else 60):  # Newton polish to machine precision
@@ -115,10 +116,13 @@ def _solve_positions(model: Model, t: float, p: np.ndarray, known: dict[str, flo
         if np.max(np.abs(r), initial=0.0) < 1e-14:
             break
         try:  # more rows than coordinates: a redundant set, solved in least squares
-            q = q - (np.linalg.solve(J, r) if J.shape[0] == J.shape[1]
-                     else np.linalg.lstsq(J, r, rcond=None)[0])
+            step = (np.linalg.solve(J, r) if J.shape[0] == J.shape[1]
+                    else np.linalg.lstsq(J, r, rcond=None)[0])
         except np.linalg.LinAlgError:
             break
+        if not np.max(np.abs(fun(q - step)[0]), initial=0.0) < np.max(np.abs(r)):
+            break  # no closer (a loop that cannot close: its residual, not a divergence's)
+        q = q - step
     r, J = fun(q)
     res = float(np.max(np.abs(r), initial=0.0))
     if n_eq > model.nq:  # redundant rows, or too many coordinates named: count by rank

@@ -206,22 +206,22 @@ def step_function(model: Model, hs: ev.HybridState, coords: list[str],
 
 
 def build(model: Model, hs: ev.HybridState, coords: list[str], triggers: list[ev.Trigger],
-          mode: bool | str, make: bool) -> CStep | None:
-    """The configuration's compiled step from the cache, or built now with ``make``;
-    None where it is not built (``make`` False), cannot be (no C compiler, a failed
-    build) or is too large (:data:`STEP_BUDGET`; four times that with ``mode`` True)."""
+          mode: bool | str, make: bool) -> CStep | str:
+    """The configuration's compiled step from the cache, or built now with ``make``; else
+    why not: not built (``make`` False), cannot be (no C compiler, a failed build) or is
+    too large (:data:`STEP_BUDGET`; four times that with ``mode`` True)."""
     if c_compiler() is None:
-        return None
-    got = step_function(model, hs, coords, triggers,
-                        4 * STEP_BUDGET if mode is True else STEP_BUDGET)
-    if got is None:
-        return None
+        return "no C compiler"
+    budget = 4 * STEP_BUDGET if mode is True else STEP_BUDGET
+    got = step_function(model, hs, coords, triggers, budget)
+    if got is None:  # (a spatial mechanism's 36 x 36 symbolic solves: 119,000)
+        return f"the step is over {budget} instructions, too large to compile"
     fn, values = got
     try:
         lib = build_library(function_key([fn]), None, [fn], build=make)
         loop_driver()
     except NotBuiltError:
-        return None
-    except (OSError, subprocess.SubprocessError, RuntimeError):
-        return None  # the virtual machine's step gives the same numbers
+        return "not built"
+    except (OSError, subprocess.SubprocessError, RuntimeError) as e:
+        return f"its build failed: {e}"  # the virtual machine's step gives the same numbers
     return CStep(external("cmm_step", str(lib)), values, lib, len(triggers))

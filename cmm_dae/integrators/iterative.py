@@ -233,7 +233,14 @@ class IterativeIntegrator(Integrator):
                     if e.status is not Status.DEAD_POINT:
                         raise
                     self.n -= 1  # the step is not taken
-                    if coordinates.natural(self.coords) and not again:
+                    if coordinates.natural(self.coords):
+                        if again:  # chosen anew, and still no position: not a singular one
+                            raise SolverError(
+                                f"the fixed-step algorithm cannot go on at t = {t:.6g} s: "
+                                "its positions do not converge from its explicit step, "
+                                "with its natural coordinates chosen anew too (its step "
+                                f"moves a body's axes by up to {np.max(np.abs(v)) * h:.3g}"
+                                "): a smaller dt, or IDA", status=Status.INTEGRATOR) from e
                         # natural coordinates that no longer span the motion (a ball
                         # joint's rotation turned away from them): chosen anew, here
                         self.coords = coordinates.free(model, hs, q, t, [])
@@ -302,12 +309,11 @@ class IterativeIntegrator(Integrator):
         got = self._steps.get(key)
         if got is None:
             mode = self.opts.compiled
-            got = None if mode is False else cstep.build(
+            got = "" if mode is False else cstep.build(
                 model, hs, self.coords, triggers, mode, mode is True or cbuild.auto_builds())
-            if got is None:
+            if isinstance(got, str):
                 if mode is True:
-                    cbuild._warn_once("compiled fixed step not used (no C compiler, a failed "
-                                      "build or a step too large to compile): running its "
+                    cbuild._warn_once(f"compiled fixed step not used ({got}): running its "
                                       "step on CasADi's virtual machine")
                 got = _CompiledStep(model, hs, self.coords, triggers)
             self._steps[key] = got

@@ -178,8 +178,15 @@ def check_params(mech: Mechanism, params: Sequence[str]) -> tuple[str, ...]:
             bad.append(Problem("sensitivities", x, "named twice"))
         seen.add(x)
         why = path_problem(mech, x)
+        parts = x.split(".")
         if why is not None:
             bad.append(Problem("sensitivities", x, why.message))
+        elif mech.spatial and parts[2:3] == ["inertia"] \
+                and len(mech.bodies[parts[1]].inertia) == 6:
+            bad.append(Problem("sensitivities", x, "an entry of a full (6-entry) inertia "
+                               "tensor: its principal axes turn with it, which the model "
+                               "does not differentiate; give the body's principal moments "
+                               "in its principal axes (3 entries) for this"))
         elif x.startswith("loads."):
             bad.append(Problem("sensitivities", x, "a load's law value is a parameter of "
                                "sweeps, with_params and design studies, but its "
