@@ -152,6 +152,8 @@ BAD = {
     "a planar key": ('axis = ["ground.z", "rod.z"]',
                      'axis = ["ground.z", "rod.z"]\nangle = 0.1',
                      "[joints.O] angle: planar only"),
+    "a restitution above 1": ("restitution = 0.0", "restitution = 2.0",
+                              "[joints.O] restitution: expected a number in [0, 1]"),
     "a reference along the axis": ('axis = ["ground.z", "rod.z"]',
                                    'axis = ["ground.z", "rod.z"]\nreference = ["ground.z", '
                                    '"rod.x"]', "[joints.O] reference: 'ground.z' is parallel"),

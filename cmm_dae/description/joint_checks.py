@@ -58,6 +58,21 @@ def joint_problems(m: Any, t: str, j: Any) -> list[Problem]:
     if j.type == "prismatic" and not (all(_finite(a) for a in j.axis)
                                       and math.hypot(*j.axis) > 1e-12):
             out.append(Problem(t, "axis", f"expected a non-zero direction, got {j.axis}"))
+    out += coordinate_parts_problems(t, j)
+    if j.type == "contact":
+        out += _contact_problems(t, j)
+    elif j.curve is not None or j.unilateral or j.side != "outside":
+        out.append(Problem(t, "curve", "only a contact joint has a curve, a side or "
+                           "'unilateral'"))
+    if j.friction is not None:
+        out += _friction_problems(t, j)
+    return out
+
+
+def coordinate_parts_problems(t: str, j: Any) -> list[Problem]:
+    """The parts on a joint's coordinate (either space): ordered limits, a restitution in
+    [0, 1], a spring's stiffness and a damping >= 0."""
+    out: list[Problem] = []
     if j.limits is not None:
         lo, up = j.limits.lower, j.limits.upper
         if lo is None and up is None:
@@ -73,13 +88,6 @@ def joint_problems(m: Any, t: str, j: Any) -> list[Problem]:
     if j.damper is not None and not (_finite(j.damper.damping) and j.damper.damping >= 0):
         out.append(Problem(t, "damper.damping", f"expected a damping >= 0, "
                            f"got {j.damper.damping}"))
-    if j.type == "contact":
-        out += _contact_problems(t, j)
-    elif j.curve is not None or j.unilateral or j.side != "outside":
-        out.append(Problem(t, "curve", "only a contact joint has a curve, a side or "
-                           "'unilateral'"))
-    if j.friction is not None:
-        out += _friction_problems(t, j)
     return out
 
 

@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import Problem
-from .joint_checks import GROUND, _check_ref, _finite, _friction_problems
+from .joint_checks import (
+    GROUND,
+    _check_ref,
+    _finite,
+    _friction_problems,
+    coordinate_parts_problems,
+)
 
 __all__ = ["SPACES", "SPATIAL_TYPES", "principal", "problems", "quaternion", "rotation"]
 
@@ -210,15 +216,14 @@ def _coordinate_problems(t: str, j: Any) -> list[Problem]:
         for key in ("limits", "spring", "damper", "friction"):
             if getattr(j, key) is not None:
                 out.append(Problem(t, key, f"a {j.type} joint has no coordinate for "
-                                   f"{key} to act on (revolute and prismatic joints have)"))
+                                   f"{key} to act on (revolute, prismatic and cylindrical "
+                                   "joints have)"))
         if j.restitution != 0.0:
             out.append(Problem(t, "restitution", f"a {j.type} joint has no stops"))
+        return out
+    out += coordinate_parts_problems(t, j)
     if j.limits is not None:
         lo, up = j.limits.lower, j.limits.upper
-        if lo is None and up is None:
-            out.append(Problem(t, "limits", "give 'lower', 'upper' or both"))
-        if lo is not None and up is not None and not lo < up:
-            out.append(Problem(t, "limits", f"lower ({lo}) must be below upper ({up})"))
         if j.type in ("revolute", "cylindrical") and any(
                 x is not None and not -math.pi < x < math.pi for x in (lo, up)):
             out.append(Problem(t, "limits", "a spatial revolute joint's coordinate lies in "
