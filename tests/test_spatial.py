@@ -332,9 +332,11 @@ def test_more_bad_spatial_input_is_named_once(tmp_path):
                   "[mechanism] space: expected one of planar, spatial, got '3d'"),
         "point": ("O = [0.0, 0.0, 0.0] }", "O = [0.0, 0.0] }",
                   "[ground.points] O: expected a list of 3 numbers"),
+        "stops": ("limits = { lower = -0.6 }", "limits = { lower = -0.6, upper = 6.0 }",
+                  "[joints.O] limits: a spatial revolute joint's angle is measured within"),
         "rest": ("limits = { lower = -0.6 }\nrestitution = 0.0",
-                 "spring = { stiffness = 1.0, rest = 4.0 }",
-                 "[joints.O] spring.rest: a spatial revolute joint's coordinate lies in"),
+                 "limits = { lower = -0.6, upper = 1.0 }\nspring = { stiffness = 1.0, rest "
+                 "= 4.0 }", "[joints.O] spring.rest: a spatial revolute joint's angle is"),
     }
     for old, new, said in cases.values():
         assert old in text
@@ -363,3 +365,21 @@ def test_a_loop_that_cannot_close_in_space_reports_its_residual(tmp_path):
     with pytest.raises(cd.AssemblyError) as err:
         cd.run_dae(cd.load(tmp_path / "u.toml"), 0.1)
     assert 0.0 < err.value.residual < 1.0 and "joint C" in str(err.value)
+
+
+def test_a_spatial_hinge_angle_is_continuous_about_its_spring_rest(tmp_path):
+    """A rod on a torsional spring whose rest is 3 rad swings through pi (where an angle
+    in (-pi, pi] would jump by 2 pi and the spring with it): as the planar file's."""
+    spring = "spring = { stiffness = 2.0, rest = 3.0 }"
+    planar = cd.example("pendulum_stop").read_text()
+    planar = planar.replace(planar[planar.index("limits = {"):planar.index("[initial]")],
+                            spring + "\n\n").replace("joints = { O = 0.3 }", "joints = { O = 2.2 }")
+    spatial = (HERE / "models" / "pendulum_stop_spatial.toml").read_text().replace(
+        "limits = { lower = -0.6 }\nrestitution = 0.0", spring).replace(
+        "joints = { O = 0.3 }", "joints = { O = 2.2 }").replace(
+        "rotation = [0.0, 0.0, 0.3]", "rotation = [0.0, 0.0, 2.2]")
+    (tmp_path / "p.toml").write_text(planar)
+    (tmp_path / "s.toml").write_text(spatial)
+    a, b = _planar_vs_spatial(tmp_path / "p.toml", tmp_path / "s.toml", 2.0)
+    c = b.joint("O").position
+    assert c.max() > np.pi and np.max(np.abs(c - a.joint("O").position)) < 1e-9

@@ -25,7 +25,8 @@ from .joint_checks import (
     coordinate_parts_problems,
 )
 
-__all__ = ["SPACES", "SPATIAL_TYPES", "principal", "problems", "quaternion", "rotation"]
+__all__ = ["SPACES", "SPATIAL_TYPES", "centre", "principal", "problems", "quaternion",
+           "rotation"]
 
 #: the values of ``[mechanism] space``
 SPACES = ("planar", "spatial")
@@ -39,6 +40,24 @@ WITH_COORDINATE = ("revolute", "prismatic", "cylindrical", "slide")
 #: rotation about that axis has no inertia to speak of (a thin rod about its own axis) and
 #: the accelerations are undetermined to round-off
 MIN_SHARE = 1e-9
+
+
+def centre(j: Any) -> float:
+    """The middle of a spatial revolute (or cylindrical) joint's coordinate range, rad: its
+    coordinate is the angle within pi of it, so it jumps by 2 pi only half a turn away
+    (no function of the bodies' coordinates alone can count turns). The middle of its two
+    limits; else a quarter turn past its one limit (it may swing 1.5 pi away from the
+    stop, and nothing can sink half a turn into it); else its spring's rest; else 0."""
+    lim = j.limits
+    if lim is not None and lim.lower is not None and lim.upper is not None:
+        return (lim.lower + lim.upper) / 2
+    if lim is not None and lim.lower is not None:
+        return lim.lower + math.pi / 2
+    if lim is not None and lim.upper is not None:
+        return lim.upper - math.pi / 2
+    if j.spring is not None and isinstance(j.spring.rest, float):
+        return j.spring.rest
+    return 0.0
 
 
 def tensor(inertia: tuple[float, ...]) -> np.ndarray:
@@ -222,17 +241,18 @@ def _coordinate_problems(t: str, j: Any) -> list[Problem]:
             out.append(Problem(t, "restitution", f"a {j.type} joint has no stops"))
         return out
     out += coordinate_parts_problems(t, j)
-    if j.limits is not None:
-        lo, up = j.limits.lower, j.limits.upper
-        if j.type in ("revolute", "cylindrical") and any(
-                x is not None and not -math.pi < x < math.pi for x in (lo, up)):
-            out.append(Problem(t, "limits", "a spatial revolute joint's coordinate lies in "
-                               "(-pi, pi] from its reference: limits inside it"))
-    if j.spring is not None and j.type in ("revolute", "cylindrical") \
-            and isinstance(j.spring.rest, float) and not -math.pi < j.spring.rest < math.pi:
-        out.append(Problem(t, "spring.rest", "a spatial revolute joint's coordinate lies in "
-                           f"(-pi, pi] from its reference: a rest inside it, got "
-                           f"{j.spring.rest}"))
+    if j.type in ("revolute", "cylindrical") and j.limits is not None:
+        mid = centre(j)
+        if any(x is not None and _finite(x) and not mid - math.pi < x < mid + math.pi
+               for x in (j.limits.lower, j.limits.upper)):
+            out.append(Problem(t, "limits", "a spatial revolute joint's angle is measured "
+                               f"within pi of the middle of its stops, {mid:.6g} rad: "
+                               "they must lie less than a turn apart"))
+    if j.type in ("revolute", "cylindrical") and j.spring is not None and _finite(
+            j.spring.rest) and not centre(j) - math.pi < j.spring.rest < centre(j) + math.pi:
+        out.append(Problem(t, "spring.rest", "a spatial revolute joint's angle is measured "
+                           f"within pi of {centre(j):.6g} rad (the middle of its range): "
+                           f"a rest there, got {j.spring.rest}"))
     if j.friction is not None:
         out += _friction_problems(t, j)
     if j.curve is not None or j.unilateral:

@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ..description.mechanism import GROUND
-from ..description.spatial import principal, rotation
+from ..description.spatial import centre, principal, rotation
 
 __all__ = ["NQ", "Geometry", "body_rows", "initial_guess", "joint_rows", "mass", "pose_blocks",
            "velocity_guess"]
@@ -140,10 +140,15 @@ def joint_rows(geo: Geometry, j, mech) -> tuple[ca.SX, list, tuple | None]:
         return ca.dot(a1, d), [], None
     align = [ca.dot(a2, n1), ca.dot(a2, n2)]
     s, c = ca.dot(a1, ca.cross(r1, r2)), ca.dot(r1, r2)
+    # the angle within pi of the joint's centre (the middle of its range: its stops never
+    # lie at the cut, where the angle jumps by 2 pi)
+    mid = centre(mech.joints[j.name])
+    cm, sm = np.cos(mid), np.sin(mid)
+    angle = mid + ca.atan2(s * cm - c * sm, c * cm + s * sm)
     if j.type == "revolute":
-        return ca.atan2(s, c), [d[0], d[1], d[2], *align], (s, c)
+        return angle, [d[0], d[1], d[2], *align], (s, c)
     if j.type == "cylindrical":  # the second point on the first's axis, the axes aligned
-        return ca.atan2(s, c), [ca.dot(d, n1), ca.dot(d, n2), *align], (s, c)
+        return angle, [ca.dot(d, n1), ca.dot(d, n2), *align], (s, c)
     # prismatic: the second point on the first's axis, the axes aligned, no roll
     return ca.dot(a1, d), [ca.dot(d, n1), ca.dot(d, n2), *align, s], None
 
