@@ -83,8 +83,9 @@ SPEC: dict[str, Table] = {
                     "coordinate its arc length (bilateral) or its gap (unilateral); gear: "
                     "two joints' coordinates in a fixed `ratio` (gears, rack and pinion). "
                     "In space: revolute (coordinate: the angle about `axis` from the first "
-                    "`reference` to the second, within pi of its range's middle), prismatic (displacement "
-                    "along the first body's `axis`), spherical, universal (no coordinate)",
+                    "`reference` to the second, within pi of its range's middle), prismatic "
+                    "(displacement along the first body's `axis`), cylindrical (both: the "
+                    "joint J:slide has the displacement), spherical, universal (none)",
                     choices=JOINT_TYPES + ("gear",) + SPATIAL_TYPES[2:]),
         "connects": Key("strings2", "[\"body.point\", \"body.point\"]: the first and the "
                         "second body and their points (`ground.X` for a ground point; a "
