@@ -383,3 +383,36 @@ def test_a_spatial_hinge_angle_is_continuous_about_its_spring_rest(tmp_path):
     a, b = _planar_vs_spatial(tmp_path / "p.toml", tmp_path / "s.toml", 2.0)
     c = b.joint("O").position
     assert c.max() > np.pi and np.max(np.abs(c - a.joint("O").position)) < 1e-9
+
+
+WHEEL = """[mechanism]
+name = "free wheel"
+space = "spatial"
+[ground]
+points = { O = [0.0, 0.0, 0.0] }
+axes = { z = [0.0, 0.0, 1.0], x = [1.0, 0.0, 0.0] }
+[bodies.w]
+mass = 1.0
+inertia = [0.011, 0.011, 0.02]
+points = { O = [0.0, 0.0, 0.0] }
+axes = { z = [0.0, 0.0, 1.0], x = [1.0, 0.0, 0.0] }
+[joints.R]
+type = "revolute"
+connects = ["ground.O", "w.O"]
+axis = ["ground.z", "w.z"]
+[initial]
+joints = { R = 0.0 }
+velocities = { R = 3.0 }
+"""
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_the_fixed_step_turns_a_free_hinge_through_its_cut(tmp_path, compiled):
+    """A wheel turning freely at 3 rad/s: the step's target past the angle's cut (pi from
+    its middle) is the same position 2 pi back (the step had failed at 1.047 s, or written
+    NaN in C with "success")."""
+    (tmp_path / "w.toml").write_text(WHEEL)
+    res = cd.run_iterative(cd.load(tmp_path / "w.toml"), 3.0, dt=1e-3, compiled=compiled)
+    assert res.status == "success" and not np.isnan(res.data["q"]).any()
+    theta = res.joint("R").position
+    assert np.max(np.abs(np.angle(np.exp(1j * (theta - 3.0 * res.t))))) < 1e-12  # rad

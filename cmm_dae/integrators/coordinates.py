@@ -13,7 +13,7 @@ from ..equations import rank
 from ..equations.model import Model
 from ..hybrid import policy as ev
 
-__all__ = ["extend", "free", "index", "kinematics", "natural"]
+__all__ = ["extend", "free", "index", "kinematics", "natural", "residual", "turning"]
 
 
 def index(model: Model, name: str) -> int:
@@ -23,6 +23,31 @@ def index(model: Model, name: str) -> int:
         return model.jidx[name]
     body, k = name.rsplit("#", 1)
     return len(model.jidx) + model.nqb * model.bidx[body] + int(k)
+
+
+def turning(model: Model, kidx: list[int]) -> list[bool]:
+    """Which of the coordinates ``kidx`` are a spatial hinge's angle, measured within pi of
+    its range's middle: past its cut the angle jumps by 2 pi, so a step's target beyond it
+    is the same position as one 2 pi back (:func:`residual`)."""
+    if not model.mech.spatial:
+        return [False] * len(kidx)
+    names = model.joint_names
+    return [k < len(names) and model.mech.joints[names[k]].type in ("revolute", "cylindrical")
+            for k in kidx]
+
+
+def residual(c, targets, wrap: list[bool]):
+    """``c - targets``, the hinges' angles' differences wrapped into (-pi, pi] (numbers or
+    CasADi): a free hinge turning through its cut is stepped as any other."""
+    d = c - targets
+    if not any(wrap):
+        return d
+    if isinstance(d, np.ndarray):
+        d = d.copy()
+        d[wrap] = np.arctan2(np.sin(d[wrap]), np.cos(d[wrap]))
+        return d
+    return ca.vertcat(*[ca.atan2(ca.sin(d[i]), ca.cos(d[i])) if w else d[i]
+                        for i, w in enumerate(wrap)])
 
 
 def natural(coords: list[str]) -> bool:

@@ -38,6 +38,7 @@ from ..equations.codegen import (
 from ..equations.lifting import external, lift
 from ..equations.model import Model
 from ..hybrid import policy as ev
+from . import coordinates
 
 __all__ = ["NEWTON_STEPS", "NEWTON_TOL", "STEP_BUDGET", "CStep", "build"]
 
@@ -142,7 +143,8 @@ def _parts(model: Model, hs: ev.HybridState, kidx: list[int], act: list[int],
     c, cd, cdd, _ = model.post_fn(q, v, a, t)
     tar, rates = S("tar", nk), S("rates", nk)
     phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
-    g = ca.vertcat(rows(phi, act), rows(cz, kidx) - tar)
+    g = ca.vertcat(rows(phi, act), coordinates.residual(rows(cz, kidx), tar,
+                                                        coordinates.turning(model, kidx)))
     jac = ca.vertcat(rows(Phi_q, act), rows(c_q, kidx))
     r = ca.mmax(ca.fabs(g))
     v1 = ca.solve(jac, ca.vertcat(-rows(Phi_t, act), rates))

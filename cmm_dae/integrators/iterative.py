@@ -37,6 +37,7 @@ class _Stepper:
     def __init__(self, model: Model, hs: ev.HybridState, coords: list[str]):
         self.model, self.hs, self.coords = model, hs, coords
         self.kidx = [coordinates.index(model, n) for n in coords]
+        self.wrap = coordinates.turning(model, self.kidx)
         self.act = model.active_rows(hs.p)
         #: natural coordinates: their system's condition number where chosen, and whether
         #: it has grown a hundredfold since (they are chosen anew before they stop
@@ -48,13 +49,15 @@ class _Stepper:
         q = q0.copy()
         for _ in range(25):
             con, c, c_q = coordinates.kinematics(model, q, t, p)
-            r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
+            r = np.concatenate([con.phi[self.act],
+                                coordinates.residual(c[self.kidx], targets, self.wrap)])
             if np.max(np.abs(r), initial=0.0) < 1e-13:
                 return q
             J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
             q = q - np.linalg.solve(J, r)
         con, c, _ = coordinates.kinematics(model, q, t, p)
-        r = np.concatenate([con.phi[self.act], c[self.kidx] - targets])
+        r = np.concatenate([con.phi[self.act],
+                            coordinates.residual(c[self.kidx], targets, self.wrap)])
         if np.max(np.abs(r), initial=0.0) > 1e-9:
             labels, ratio = ev.dependent_rows(model, q0, t, p, tol=1.0)
             raise SolverError(f"dead point near t = {t:.6g} s: the position equations do not "
@@ -105,8 +108,8 @@ class _CompiledStep:
         tar = S("tar", nk)
         phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
         cz, c_q = coordinates.extend((cz, c_q), (q, ca.SX.eye(nq)))
-        G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act),
-                                                         rows(cz, kidx) - tar)])
+        G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act), coordinates.residual(
+            rows(cz, kidx), tar, coordinates.turning(model, kidx)))])
         rates = S("rates", nk)
         vel = ca.Function("vel", [q, tn, p, tar, rates], [
             ca.mmax(ca.fabs(G(q, tn, p, tar))), ca.vertcat(rows(Phi_q, act), rows(c_q, kidx)),
