@@ -137,8 +137,11 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
     bodies = [read_body(r, k, v) if spatial else _body(r, k, v)
               for k, v in r.sub("", data, "bodies").items()]
     jt = r.sub("", data, "joints")
-    joints = [_joint(r, k, v, spatial) for k, v in jt.items() if not is_gear(v)]
-    joints += [_joint(r, SLIDE_OF.format(k), s, spatial) for k, s in slides(r, jt, spatial)]
+    added = slides(r, jt, spatial)  # (a table of one of their names: refused there)
+    joints = [_joint(r, k, v, spatial) for k, v in jt.items()
+              if not is_gear(v) and k not in {SLIDE_OF.format(n) for n, _ in added}
+              and not (spatial and k.endswith(":slide") and k[:-6] in jt)]
+    joints += [_joint(r, SLIDE_OF.format(k), s, spatial) for k, s in added]
     gears = [read_gear(r, k, v) for k, v in jt.items() if is_gear(v)]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
     loads = [_load(r, k, v, dim) for k, v in r.sub("", data, "loads").items()]

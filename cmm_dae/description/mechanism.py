@@ -49,8 +49,9 @@ class Body:
         Named points in the body frame, m.
     guess : (float, float, float) or None
         Pose guess (x m, y m, theta rad) of the body frame for assembly; in a spatial
-        mechanism six numbers: the frame's origin (m) and its rotation vector (axis times
-        angle, rad).
+        mechanism six numbers, the frame's origin (m) and its rotation vector (axis times
+        angle, rad), or twelve, then the origin's velocity (m/s) and the angular velocity
+        (rad/s, global axes) too (where no [initial] rate names the motion).
     axes : dict[str, (float, float, float)]
         Spatial mechanisms: named directions in the body frame (normalised on use), which
         joints name as ``"body.axis"``.
@@ -116,8 +117,12 @@ class Joint(_TwoPoints):
     ----------
     name : str
         Joint name.
-    type : {"revolute", "prismatic"}
-        Pair type.
+    type : {"revolute", "prismatic", "contact"}; in space also "cylindrical", "spherical",
+        "universal"
+        Pair type. A spatial cylindrical joint J's displacement along its axis is the
+        coordinate of a second joint, ``Joint("J:slide", "slide", first, second,
+        axes=J.axes)``, added by the Mechanism where it is not given (give it to put limits,
+        a spring, a damper or friction on the displacement).
     first, second : str
         ``"body.point"`` of the first and the second body.
     axis : (float, float)
@@ -158,7 +163,8 @@ class Joint(_TwoPoints):
     """
 
     name: str
-    type: Literal["revolute", "prismatic", "contact"]
+    type: Literal["revolute", "prismatic", "contact", "cylindrical", "spherical",
+                  "universal", "slide"]
     first: str
     second: str
     axis: Vec2 = (1.0, 0.0)

@@ -142,8 +142,9 @@ def _body_problems(name: str, b: Any) -> list[Problem]:
         elif not pseudo.min() > MIN_SHARE * w.sum():
             out.append(Problem(t, "inertia", "a principal moment is not below the sum of "
                                f"the other two (moments {', '.join(f'{x:.6g}' for x in w)} "
-                               "kg m^2): no rigid body has that inertia (a thin rod keeps "
-                               "a small moment about its own axis)"))
+                               "kg m^2): only a body of no thickness has it (a flat plate, "
+                               "a thin rod), which leaves a rotation without inertia; give "
+                               "it its thickness"))
     if not _vec3(b.centroid):
         out.append(Problem(t, "centroid", f"expected [x, y, z] (m), got {list(b.centroid)}"))
     for k, p in b.points.items():
@@ -328,6 +329,14 @@ def problems(m: Any) -> list[Problem]:
                 and m.joints[ld.joint].type not in WITH_COORDINATE:
             out.append(Problem(f"loads.{name}", "joint", f"joint '{ld.joint}' is "
                                f"{m.joints[ld.joint].type}: it has no coordinate to load"))
+    for name, val in m.initial.joints.items():  # within pi of the angle's middle
+        j = m.joints.get(name)
+        if j is not None and j.type in ("revolute", "cylindrical") and _finite(val) and \
+                not centre(j) - math.pi < val <= centre(j) + math.pi:
+            out.append(Problem("initial", f"joints.{name}", f"{val} rad lies more than pi "
+                               f"from {centre(j):.6g} rad, the middle of the joint's range, "
+                               "where its angle is measured: give the same position within "
+                               "it (2 pi less or more)"))
     for name in m.drivers:
         if name in m.joints and m.joints[name].type not in WITH_COORDINATE:
             out.append(Problem(f"drivers.{name}", "", f"joint '{name}' is "

@@ -90,6 +90,10 @@ def slides(r: Any, joints: dict, spatial: bool) -> list[tuple[str, dict]]:
     for name, d in joints.items() if spatial else ():
         if not isinstance(d, dict) or d.get("type") != "cylindrical":
             continue
+        if f"{name}:slide" in joints:  # (it would be replaced by the slide, silently)
+            r.bad(f"joints.{name}:slide", "", f"the slide of cylindrical joint '{name}' is "
+                  f"written in joints.{name}.slide (limits, spring, ...), not as a table")
+            continue
         sub = r.keys(f"joints.{name}.slide", r.sub(f"joints.{name}", d, "slide"), SLIDE_KEYS)
         out.append((name, {"type": "slide", **{k: d[k] for k in ("connects", "axis",
                                                                    "reference") if k in d},

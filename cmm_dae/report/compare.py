@@ -238,8 +238,12 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     mask = a.away_from_events(t, 2 * dt, b)
     series: list[SeriesDiff] = []
 
-    def add(name: str, unit: str, ya: np.ndarray, yb: np.ndarray) -> None:
+    def add(name: str, unit: str, ya: np.ndarray, yb: np.ndarray, turn: bool = False
+            ) -> None:
+        if turn:  # a spatial hinge's angle, measured within pi of its middle: unwrapped
+            ya, yb = np.unwrap(ya), np.unwrap(yb)  # to resample, its difference wrapped
         d = (a.resample(t, ya) - b.resample(t, yb))[mask]
+        d = np.angle(np.exp(1j * d)) if turn else d
         scale = float(np.max(np.abs(ya), initial=0.0))
         series.append(SeriesDiff(name, unit, float(np.max(np.abs(d), initial=0.0)),
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))
@@ -248,13 +252,14 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
     # a spatial joint's force and moment are 3-vectors: each component is a series
     spatial = a.layout.space == "spatial"
     for name in a.layout.drivers:
-        unit = "N m" if types[name] == "revolute" else "N"
+        unit = "N m" if a.layout.coordinate_unit(name) == "rad" else "N"
         add(f"driver {name} effort", unit, a.driver(name).effort, b.driver(name).effort)
     for name in a.watched_joints():
-        rev = types[name] == "revolute"
+        rev = a.layout.coordinate_unit(name) == "rad"
         ja, jb = a.joint(name), b.joint(name)
         if types[name] not in ("spherical", "universal"):  # (no coordinate: zeros)
-            add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position)
+            add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position,
+                spatial and rev)
         for k, c in enumerate("xyz" if spatial else "xy"):
             add(f"joint {name} force {c}", "N", ja.force[:, k], jb.force[:, k])
         if spatial:

@@ -25,8 +25,7 @@ def _event_lines(ax, res: Result) -> None:
 
 
 def _unit(res: Result, joint: str) -> str:
-    i = res.layout.joints.index(joint)
-    return "rad" if res.layout.joint_types[i] == "revolute" else "m"
+    return res.layout.coordinate_unit(joint)
 
 
 def _stacked(results: list[Result], names: list[str], series, labels, height: float,
@@ -127,7 +126,11 @@ def differences(a: Result, b: Result, t: np.ndarray, mask: np.ndarray, path: Pat
         else:
             ya, yb = a.joint(n).position, b.joint(n).position
             unit, lab = _unit(a, n), f"joint {n} position"
+        turn = a.layout.space == "spatial" and unit == "rad" and kind != "driver"
+        if turn:  # a spatial hinge's angle: unwrapped to resample, the difference wrapped
+            ya, yb = np.unwrap(ya), np.unwrap(yb)
         d = a.resample(t, ya) - b.resample(t, yb)
+        d = np.angle(np.exp(1j * d)) if turn else d
         ax.plot(t, np.where(mask, d, np.nan), color="k", lw=1.0)
         _event_lines(ax, a)
         ax.set_ylabel(f"diff [{unit}]")

@@ -28,21 +28,28 @@ def columns(res: Result) -> dict[str, np.ndarray]:
                                    "configuration": labels[res.configuration],
                                    "configuration index": res.configuration}
     lay = res.layout
-    for name, typ in zip(lay.joints, lay.joint_types, strict=True):
-        u = "rad" if typ == "revolute" else "m"
+    spatial = lay.space == "spatial"
+    for name in lay.joints:
+        u = lay.coordinate_unit(name)
         js = res.joint(name)
         cols[f"joint {name} position [{u}]"] = js.position
         cols[f"joint {name} velocity [{u}/s]"] = js.velocity
         cols[f"joint {name} acceleration [{u}/s^2]"] = js.acceleration
-        cols[f"joint {name} force x [N]"] = js.force[:, 0]
-        cols[f"joint {name} force y [N]"] = js.force[:, 1]
-        cols[f"joint {name} torque [N m]"] = js.torque
+        for k, x in enumerate("xyz" if spatial else "xy"):
+            cols[f"joint {name} force {x} [N]"] = js.force[:, k]
+        if spatial:  # (a 3-vector about the second body's connect point, global axes)
+            for k, x in enumerate("xyz"):
+                cols[f"joint {name} torque {x} [N m]"] = js.torque[:, k]
+        else:
+            cols[f"joint {name} torque [N m]"] = js.torque
     for name in lay.drivers:
-        u = "N m" if lay.joint_types[lay.joints.index(name)] == "revolute" else "N"
+        u = "N m" if lay.coordinate_unit(name) == "rad" else "N"
         cols[f"driver {name} effort [{u}]"] = res.driver(name).effort
+    pose = (("x [m]", "y [m]", "z [m]", "qw", "qx", "qy", "qz") if spatial
+            else ("x [m]", "y [m]", "theta [rad]"))
     for name in lay.bodies:
         b = res.body(name)
-        for k, lab in enumerate(("x [m]", "y [m]", "theta [rad]")):
+        for k, lab in enumerate(pose):
             cols[f"body {name} {lab}"] = b.pose[:, k]
     return cols
 

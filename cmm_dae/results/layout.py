@@ -107,5 +107,6 @@ class Layout:
         return self.joint_types[self.joints.index(joint)]
 
     def coordinate_unit(self, joint: str) -> str:
-        """The unit of a joint's coordinate: "rad" (revolute), else "m"."""
-        return "rad" if self.joint_type(joint) == "revolute" else "m"
+        """The unit of a joint's coordinate: "rad" (revolute, a cylindrical joint's angle),
+        else "m"."""
+        return "rad" if self.joint_type(joint) in ("revolute", "cylindrical") else "m"
