@@ -27,7 +27,7 @@ from ..core.figures import pyplot
 from ..description.curves import spline
 from ..description.parts import Curve
 from ..equations.gearing import pinion_radius, pitch_radius
-from .animation3d import Scene3D, frame_indices
+from .animation3d import Scene3D, draw_bodies, frame_indices
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..results.result import Result
@@ -215,14 +215,8 @@ class _Scene:
         closed = {b: tr.shape[1] > 2 for b, tr in self.tracks.items()}
 
         def update(k: int):
-            i = self.idx[k]
-            cfg = res.configurations[res.configuration[i]]
-            title.set_text(f"{lay.mechanism}   t = {res.t[i]:.3f} s\n{cfg.describe()}")
-            for b, line in body_lines.items():
-                xy = self.tracks[b][k]
-                if closed[b]:
-                    xy = np.vstack([xy, xy[:1]])
-                line.set_data(xy[:, 0], xy[:, 1])
+            cfg = draw_bodies(self, res, title, body_lines, closed, k,
+                              lambda line, p: line.set_data(p[:, 0], p[:, 1]))
             for line, bars_, (gl, bars) in zip(guide_lines, bar_lines, self.guides, strict=True):
                 line.set_data(gl[k, :, 0], gl[k, :, 1])
                 for m, bl in enumerate(bars_):

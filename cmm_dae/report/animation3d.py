@@ -69,6 +69,19 @@ def rotations(quat: np.ndarray) -> np.ndarray:
     ], -2)
 
 
+def draw_bodies(scene, res, title, body_lines: dict, closed: dict, k: int, put):
+    """Frame ``k`` of an animation (either space): the title (mechanism, time,
+    configuration) and each body's outline through its points, closed where it has three
+    or more, drawn by ``put(line, points)``; returns the frame's configuration."""
+    i = scene.idx[k]
+    cfg = res.configurations[res.configuration[i]]
+    title.set_text(f"{res.layout.mechanism}   t = {res.t[i]:.3f} s\n{cfg.describe()}")
+    for b, line in body_lines.items():
+        pts = scene.tracks[b][k]
+        put(line, np.vstack([pts, pts[:1]]) if closed[b] else pts)
+    return cfg
+
+
 class Scene3D:
     """World coordinates (m) of everything drawn of a spatial run, at the frames' samples.
 
@@ -189,14 +202,8 @@ class Scene3D:
         closed = {b: tr.shape[1] > 2 for b, tr in self.tracks.items()}
 
         def update(k: int):
-            i = self.idx[k]
-            cfg = res.configurations[res.configuration[i]]
-            title.set_text(f"{lay.mechanism}   t = {res.t[i]:.3f} s\n{cfg.describe()}")
-            for b, line in body_lines.items():
-                xyz = self.tracks[b][k]
-                if closed[b]:
-                    xyz = np.vstack([xyz, xyz[:1]])
-                line.set_data_3d(xyz[:, 0], xyz[:, 1], xyz[:, 2])
+            cfg = draw_bodies(self, res, title, body_lines, closed, k,
+                              lambda line, p: line.set_data_3d(p[:, 0], p[:, 1], p[:, 2]))
             for j, mk in marks.items():
                 p = self.markers[j][k]
                 mk.set_data_3d([p[0]], [p[1]], [p[2]])
