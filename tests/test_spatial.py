@@ -423,6 +423,7 @@ def test_spatial_exports_units_and_an_angles_wrap(tmp_path):
     cylindrical joint's angle driven in N m, and a compared angle's difference wrapped
     (the Bennett linkage's J2 passes its cut: 6.18 rad had been reported for 0.22)."""
     res = cd.run_dae(cd.load(cd.example("collar_on_shaft")), 0.2)
+    assert res.watched_joints() == ["S", "S:slide"]  # the joint's angle and reaction too
     cols = res.columns()
     assert {"joint S torque z [N m]", "joint S:slide position [m]", "joint S position [rad]",
             "body collar qw"} <= set(cols)

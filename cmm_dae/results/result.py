@@ -216,6 +216,10 @@ class Result:
         out = list(self.layout.metamorphic)
         out += [j for j in self.layout.frictional if j not in out]
         out += [j for j in self.layout.springs if j not in out]
+        # a cylindrical joint's slide: the joint itself too (its angle; its reaction)
+        out = [x for j in out for x in ((j[:-6], j) if j.endswith(":slide")
+                                         and j[:-6] in self.layout.joints else (j,))]
+        out = list(dict.fromkeys(out))
         lay = self.layout
         return out or [j for j, ty in zip(lay.joints, lay.joint_types, strict=True)
                        if ty not in ("spherical", "universal")] or list(lay.joints)
