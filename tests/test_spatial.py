@@ -434,3 +434,15 @@ def test_spatial_exports_units_and_an_angles_wrap(tmp_path):
     assert np.ptp(b.joint("J2").position) > 6.0  # it wraps
     row = {s.name: s for s in cd.compare(a, b).series}["joint J2 position"]
     assert row.max_abs < 0.5  # rad, the fixed step's first-order error (measured 0.22)
+
+
+def test_a_joint_named_like_a_slide_is_kept_beside_a_revolute(tmp_path):
+    """Only a cylindrical joint's own slide name is refused as a table: a joint named
+    "O:slide" beside a revolute joint O is a joint of its own (it had been dropped)."""
+    text = (HERE / "models" / "pendulum_stop_spatial.toml").read_text()
+    text = text.replace("[joints.O]", "[bodies.bob]\nmass = 0.1\ninertia = [1e-5, 1e-5, 1e-5]"
+                        "\npoints = { O = [0.0, 0.0, 0.0] }\nguess = { position = [0.3, 0.0, "
+                        "0.0] }\n\n[joints.O]").replace("[initial]", '[joints."O:slide"]\n'
+                        'type = "spherical"\nconnects = ["rod.tip", "bob.O"]\n\n[initial]')
+    (tmp_path / "j.toml").write_text(text)
+    assert list(cd.load(tmp_path / "j.toml").joints) == ["O", "O:slide"]

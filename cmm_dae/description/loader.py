@@ -20,7 +20,6 @@ from .higher_pairs import contact_keys, is_gear, read_gear
 from .mechanism import (
     LAWS,
     MOTIONS,
-    SLIDE_OF,
     Body,
     Damper,
     Driver,
@@ -38,9 +37,17 @@ from .mechanism import (
 )
 from .reader import Reader as _Reader
 from .reader import short as _short
+from .records import SLIDE_OF, slide_base
 from .schema import SPEC, default, keys_of
 from .spatial import SPACES, SPATIAL_TYPES
-from .spatial_reader import GRAVITY, read_axes, read_body, read_joint_axes, slides
+from .spatial_reader import (
+    GRAVITY,
+    is_cylindrical,
+    read_axes,
+    read_body,
+    read_joint_axes,
+    slides,
+)
 
 #: Largest model file read, bytes (a mechanism description is a few kB of text).
 MAX_FILE_BYTES = 16 * 2**20
@@ -138,9 +145,8 @@ def _from_dict(data: dict, source: str | None) -> Mechanism:
               for k, v in r.sub("", data, "bodies").items()]
     jt = r.sub("", data, "joints")
     added = slides(r, jt, spatial)  # (a table of one of their names: refused there)
-    joints = [_joint(r, k, v, spatial) for k, v in jt.items()
-              if not is_gear(v) and k not in {SLIDE_OF.format(n) for n, _ in added}
-              and not (spatial and k.endswith(":slide") and k[:-6] in jt)]
+    joints = [_joint(r, k, v, spatial) for k, v in jt.items() if not is_gear(v)
+              and not (spatial and is_cylindrical(jt.get(slide_base(k))))]
     joints += [_joint(r, SLIDE_OF.format(k), s, spatial) for k, s in added]
     gears = [read_gear(r, k, v) for k, v in jt.items() if is_gear(v)]
     drivers = [_driver(r, k, v) for k, v in r.sub("", data, "drivers").items()]
@@ -220,7 +226,7 @@ def _joint(r: _Reader, name: str, d: Any, spatial: bool = False) -> Joint:
     d = r.keys(t, d, JOINT_KEYS)
     jtype = r.string(t, d, "type")
     types = SPATIAL_TYPES if spatial else JOINT_TYPES
-    if jtype and jtype not in types and not (spatial and name.endswith(":slide")):
+    if jtype and jtype not in types and not (spatial and slide_base(name)):
         r.bad(t, "type", f"expected one of {', '.join(map(repr, types))}, got {jtype!r}")
     first, second = _connects(r, t, d)
     curve, side, unilateral = contact_keys(r, t, d, jtype, spatial)

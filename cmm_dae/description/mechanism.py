@@ -17,7 +17,7 @@ from .checks import FRAMES, GROUND, JOINT_TYPES, LAWS, MOTIONS, validate
 from .curves import spline
 from .laws import Driver, Law, Zone
 from .parts import Curve, Damper, Friction, Gear, Limits, Spring
-from .records import Initial, Load, Vec2, Vec3, _floats, _frozen
+from .records import SLIDE_OF, Initial, Load, Vec2, Vec3, _floats, _frozen
 
 __all__ = [
     "FRAMES", "GROUND", "JOINT_TYPES", "LAWS", "MOTIONS", "Body", "Curve", "Damper",
@@ -351,10 +351,6 @@ class Mechanism:
     def spatial(self) -> bool:
         """Whether the mechanism is spatial (``space == "spatial"``)."""
         return self.space == "spatial"
-
-
-#: the name of a cylindrical joint's slide, the joint of its second coordinate
-SLIDE_OF = "{}:slide"
 
 
 def _with_slides(joints: MappingProxyType) -> MappingProxyType:

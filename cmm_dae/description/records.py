@@ -10,10 +10,22 @@ from types import MappingProxyType
 
 from .laws import Law, Zone
 
-__all__ = ["Initial", "Load", "Vec2", "Vec3"]
+__all__ = ["SLIDE", "SLIDE_OF", "Initial", "Load", "Vec2", "Vec3", "slide_base"]
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
+
+
+#: the suffix of a slide's name: a cylindrical joint J's second coordinate is the joint
+#: "J:slide" (and a frictional unilateral contact K's arc length the model's "K:slide")
+SLIDE = ":slide"
+#: the name of a cylindrical joint's slide, the joint of its second coordinate
+SLIDE_OF = "{}" + SLIDE
+
+
+def slide_base(name: str) -> str | None:
+    """The joint whose slide ``name`` is ("J" of "J:slide"), else None."""
+    return name[:-len(SLIDE)] if name.endswith(SLIDE) else None
 
 
 def _floats(v) -> tuple:

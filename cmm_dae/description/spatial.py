@@ -24,6 +24,7 @@ from .joint_checks import (
     _friction_problems,
     coordinate_parts_problems,
 )
+from .records import slide_base
 
 __all__ = ["SPACES", "SPATIAL_TYPES", "centre", "principal", "problems", "quaternion",
            "rotation"]
@@ -190,7 +191,7 @@ def _axis_ref(m: Any, t: str, key: str, ref: Any, out: list[Problem]) -> np.ndar
 def _joint_problems(m: Any, name: str, j: Any) -> list[Problem]:
     t, out = f"joints.{name}", []
     if j.type == "slide":
-        base = m.joints.get(name[:-len(":slide")]) if name.endswith(":slide") else None
+        base = m.joints.get(slide_base(name))
         if base is None or base.type != "cylindrical" or (base.first, base.second) != \
                 (j.first, j.second):
             return [Problem(t, "type", "a slide is the second coordinate of a cylindrical "

@@ -8,10 +8,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from .mechanism import Body
+from .mechanism import SLIDE_OF, Body
 from .schema import keys_of
 
-__all__ = ["read_axes", "read_body", "read_joint_axes", "slides"]
+__all__ = ["is_cylindrical", "read_axes", "read_body", "read_joint_axes", "slides"]
 
 #: the default gravity of a spatial mechanism, m/s^2 (z up)
 GRAVITY = (0.0, 0.0, -9.81)
@@ -83,14 +83,19 @@ def read_joint_axes(r: Any, t: str, d: dict, jtype: str
 SLIDE_KEYS = ("limits", "restitution", "spring", "damper", "friction")
 
 
+def is_cylindrical(d: Any) -> bool:
+    """Whether a joint table (of the file, as parsed) is a cylindrical joint's."""
+    return isinstance(d, dict) and d.get("type") == "cylindrical"
+
+
 def slides(r: Any, joints: dict, spatial: bool) -> list[tuple[str, dict]]:
     """(joint, table) for the slide of each cylindrical joint: its ``slide`` sub-table's
     parts, with the joint's own connects and axes (read as a joint of type "slide")."""
     out = []
     for name, d in joints.items() if spatial else ():
-        if not isinstance(d, dict) or d.get("type") != "cylindrical":
+        if not is_cylindrical(d):
             continue
-        if f"{name}:slide" in joints:  # (it would be replaced by the slide, silently)
+        if SLIDE_OF.format(name) in joints:  # (it would be replaced by the slide, silently)
             r.bad(f"joints.{name}:slide", "", f"the slide of cylindrical joint '{name}' is "
                   f"written in joints.{name}.slide (limits, spring, ...), not as a table")
             continue

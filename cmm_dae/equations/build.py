@@ -13,6 +13,7 @@ import numpy as np
 
 from ..core.errors import ModelError, Problem
 from ..description.mechanism import GROUND
+from ..description.records import SLIDE
 from . import reaction, spatial
 from .contact import contact_gap_arc
 from .laws import driver_expr
@@ -22,9 +23,6 @@ from .reaction import reacting
 __all__ = ["SLIDE", "Constraints", "Forces", "Frame", "JointCoords", "Row", "applied_forces",
            "constraint_rows", "names", "powers"]
 
-
-#: the suffix of a frictional unilateral contact's slide ("K:slide")
-SLIDE = ":slide"
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from ..description.records import slide_base
+
 __all__ = ["SMOOTH", "arm", "growth", "level", "magnitude", "reacting", "solve"]
 
 #: A reaction's magnitude is sqrt(F . F + SMOOTH^2) (N): its derivative, which IDA's and
@@ -50,7 +52,7 @@ def _rows(model: Any, joint: str) -> list[int]:
     if len(rows) != j.rows:  # (the model refuses this when it is built)
         raise ValueError(f"joint '{joint}' has {len(rows)} constraint rows, not {j.rows}")
     if j.type == "slide":  # a cylindrical joint's slide: its joint's normal rows
-        return model.rows_of("joint", joint[:-len(":slide")])[:2]
+        return model.rows_of("joint", slide_base(joint))[:2]
     if j.spatial:  # the point rows: a hinge's three (its pin's whole force, global axes),
         return rows[:3] if j.type == "revolute" else rows[:2]  # a guide's two normal ones
     return rows[1:] if j.type == "prismatic" else rows

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.errors import STATUS_MESSAGES, CmmError, Status
 from ..core.records import Configuration, Event, Stats
+from ..description.records import slide_base
 from ..description.spatial import quaternion
 from .audit import Energy, energy_audit
 from .export import columns, save, to_csv, to_dataframe
@@ -217,8 +218,8 @@ class Result:
         out += [j for j in self.layout.frictional if j not in out]
         out += [j for j in self.layout.springs if j not in out]
         # a cylindrical joint's slide: the joint itself too (its angle; its reaction)
-        out = [x for j in out for x in ((j[:-6], j) if j.endswith(":slide")
-                                         and j[:-6] in self.layout.joints else (j,))]
+        out = [x for j in out for x in ((slide_base(j), j) if slide_base(j)
+                                         in self.layout.joints else (j,))]
         out = list(dict.fromkeys(out))
         lay = self.layout
         return out or [j for j, ty in zip(lay.joints, lay.joint_types, strict=True)
