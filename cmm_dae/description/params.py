@@ -290,10 +290,10 @@ def _replaced(mech: Mechanism, values: Mapping[str, object], check: bool) -> Mec
             xy = list(pts[name])
             xy["xyz".index(parts[-1])] = value
             pts[name] = tuple(xy)
-        elif _tensor_entry(mech, parts) is not None:
+        elif (k := _tensor_entry(mech, parts)) is not None:
             b = tables["bodies"][parts[1]]
             entries = list(b.inertia)
-            entries[_tensor_entry(mech, parts)] = value
+            entries[k] = value
             b = replace(b, inertia=tuple(entries))
             if not check:  # (the constructor makes the entries floats: a symbol NaN)
                 object.__setattr__(b, "inertia", tuple(entries))

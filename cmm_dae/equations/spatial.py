@@ -20,7 +20,7 @@ import numpy as np
 from ..description.mechanism import GROUND
 from ..description.spatial import centre, principal, rotation
 
-__all__ = ["NQ", "Geometry", "body_rows", "initial_guess", "joint_rows", "mass", "pose_blocks",
+__all__ = ["NQ", "Geometry", "body_rows", "initial_guess", "joint_rows", "mass",
            "velocity_guess"]
 
 #: coordinates of a spatial body: centroid (3) and three principal axes (3 x 3)
@@ -89,11 +89,9 @@ class Geometry:
 
     def direction(self, body: str, d) -> ca.SX:
         """A body-frame direction ``d`` (numbers) in global axes."""
-        d = ca.DM(np.asarray(d, float))
         if body == GROUND:
-            return d
-        R = self.R[body]
-        return self.axes(body) @ (d if np.array_equal(R, np.eye(3)) else ca.DM(R.T) @ d)
+            return ca.DM(np.asarray(d, float))
+        return self.axes(body) @ self._local(body, [float(x) for x in d])
 
     def axis(self, ref: str) -> np.ndarray:
         """``"body.axis"`` in its body frame, normalised (numbers)."""
@@ -151,19 +149,6 @@ def joint_rows(geo: Geometry, j, mech) -> tuple[ca.SX, list, tuple | None]:
         return angle, [ca.dot(d, n1), ca.dot(d, n2), *align], (s, c)
     # prismatic: the second point on the first's axis, the axes aligned, no roll
     return ca.dot(a1, d), [ca.dot(d, n1), ca.dot(d, n2), *align, s], None
-
-
-def pose_blocks(model, q: np.ndarray, body: str) -> tuple[np.ndarray, np.ndarray]:
-    """The body frame's origin (n, 3) and rotation matrix (n, 3, 3) from samples of the
-    coordinates ``q`` (n, nq)."""
-    i = model.bidx[body]
-    b = model.mech.bodies[body]
-    blk = np.atleast_2d(q)[:, NQ * i:NQ * i + NQ]
-    E = blk[:, 3:].reshape(-1, 3, 3).transpose(0, 2, 1)  # columns e1, e2, e3
-    R = principal(b.inertia)[0]
-    rot = E @ R.T
-    origin = blk[:, :3] - rot @ np.asarray(b.centroid, float)
-    return origin, rot
 
 
 def initial_guess(model) -> np.ndarray:

@@ -55,19 +55,21 @@ def natural(coords: list[str]) -> bool:
     return any("#" in c for c in coords)
 
 
-def extend(joint: tuple, bodies: tuple) -> tuple:
-    """Each joint-coordinate quantity (values, rates, accelerations, or a Jacobian) with the
-    bodies' matching one appended below it: numbers or CasADi."""
-    if isinstance(joint[0], np.ndarray):
-        return tuple(np.concatenate([x, y]) if np.ndim(x) == 1 else np.vstack([x, y])
-                     for x, y in zip(joint, bodies, strict=True))
-    return tuple(ca.vertcat(x, y) for x, y in zip(joint, bodies, strict=True))
+def extend(joint: tuple, bodies: tuple, natural: bool) -> tuple:
+    """Each joint-coordinate quantity (values, rates, accelerations: numbers) with the
+    bodies' matching one appended, where natural coordinates are stepped (else as is)."""
+    if not natural:
+        return joint
+    return tuple(np.concatenate([x, y]) for x, y in zip(joint, bodies, strict=True))
 
 
-def kinematics(model: Model, q: np.ndarray, t: float, p: np.ndarray) -> tuple:
-    """:meth:`Model.kinematics` with the natural coordinates appended to the joint
-    coordinates: (Constraints, [c; q], [c_q; I])."""
+def kinematics(model: Model, q: np.ndarray, t: float, p: np.ndarray, natural: bool
+               ) -> tuple:
+    """:meth:`Model.kinematics`, with the natural coordinates appended to the joint
+    coordinates where they are stepped: (Constraints, [c; q], [c_q; I])."""
     con, c, c_q = model.kinematics(q, t, p)
+    if not natural:  # (a long chain's identity, nq x nq, each Newton iteration: not built)
+        return con, c, c_q
     return con, np.concatenate([c, q]), np.vstack([c_q, np.eye(model.nq)])
 
 

@@ -38,6 +38,7 @@ class _Stepper:
         self.model, self.hs, self.coords = model, hs, coords
         self.kidx = [coordinates.index(model, n) for n in coords]
         self.wrap = coordinates.turning(model, self.kidx)
+        self.natural = coordinates.natural(coords)
         self.act = model.active_rows(hs.p)
         #: natural coordinates: their system's condition number where chosen, and whether
         #: it has grown a hundredfold since (they are chosen anew before they stop
@@ -48,14 +49,14 @@ class _Stepper:
         model, p = self.model, self.hs.p
         q = q0.copy()
         for _ in range(25):
-            con, c, c_q = coordinates.kinematics(model, q, t, p)
+            con, c, c_q = coordinates.kinematics(model, q, t, p, self.natural)
             r = np.concatenate([con.phi[self.act],
                                 coordinates.residual(c[self.kidx], targets, self.wrap)])
             if np.max(np.abs(r), initial=0.0) < 1e-13:
                 return q
             J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
             q = q - np.linalg.solve(J, r)
-        con, c, _ = coordinates.kinematics(model, q, t, p)
+        con, c, _ = coordinates.kinematics(model, q, t, p, self.natural)
         r = np.concatenate([con.phi[self.act],
                             coordinates.residual(c[self.kidx], targets, self.wrap)])
         if np.max(np.abs(r), initial=0.0) > 1e-9:
@@ -69,10 +70,10 @@ class _Stepper:
 
     def velocities(self, q: np.ndarray, t: float, rates: np.ndarray) -> np.ndarray:
         model, p = self.model, self.hs.p
-        con, _, c_q = coordinates.kinematics(model, q, t, p)
+        con, _, c_q = coordinates.kinematics(model, q, t, p, self.natural)
         J = np.vstack([con.Phi_q[self.act], c_q[self.kidx]])
         rhs = np.concatenate([-con.Phi_t[self.act], rates])
-        if coordinates.natural(self.coords):  # how well they still span the motion
+        if self.natural:  # how well they still span the motion
             cond = float(np.linalg.cond(J))
             self.cond0 = min(self.cond0, cond)
             self.worn = not cond < 100.0 * self.cond0
@@ -101,13 +102,12 @@ class _CompiledStep:
         S = ca.SX.sym
         q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
         h = tn - t
-        c, cd, cdd = coordinates.extend(model.post_fn(q, v, a, t)[:3], (q, v, a))
+        c, cd, cdd, _ = model.post_fn(q, v, a, t)
         pre = ca.Function("pre", [q, v, a, t, tn], [
             q + v * h, rows(c, kidx) + rows(cd, kidx) * h,  # the previous instant's rates
             rows(cd, kidx) + rows(cdd, kidx) * h])
         tar = S("tar", nk)
         phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
-        cz, c_q = coordinates.extend((cz, c_q), (q, ca.SX.eye(nq)))
         G = ca.Function("g", [q, tn, p, tar], [ca.vertcat(rows(phi, act), coordinates.residual(
             rows(cz, kidx), tar, coordinates.turning(model, kidx)))])
         rates = S("rates", nk)
@@ -227,7 +227,7 @@ class IterativeIntegrator(Integrator):
             if fast is None or not resid < 1e-9:
                 c, cd = model.joint_rates(q, v)
                 c, cd, cdd = coordinates.extend(
-                    (c, cd, model.joint_accelerations(q, v, a, t)), (q, v, a))
+                    (c, cd, model.joint_accelerations(q, v, a, t)), (q, v, a), st.natural)
                 targets = c[k] + cd[k] * h  # the paper's step: rates of the previous instant
                 rates = cd[k] + cdd[k] * h
                 try:  # (also where the compiled Newton failed: the dead-point report)
@@ -236,7 +236,7 @@ class IterativeIntegrator(Integrator):
                     if e.status is not Status.DEAD_POINT:
                         raise
                     self.n -= 1  # the step is not taken
-                    if coordinates.natural(self.coords):
+                    if st.natural:
                         if again:  # chosen anew, and still no position: not a singular one
                             raise SolverError(
                                 f"the fixed-step algorithm cannot go on at t = {t:.6g} s: "
