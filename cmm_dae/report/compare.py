@@ -240,16 +240,12 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
 
     def add(name: str, unit: str, ya: np.ndarray, yb: np.ndarray, turn: bool = False
             ) -> None:
-        if turn:  # a spatial hinge's angle, measured within pi of its middle: unwrapped
-            ya, yb = np.unwrap(ya), np.unwrap(yb)  # to resample, its difference wrapped
-        d = (a.resample(t, ya) - b.resample(t, yb))[mask]
-        d = np.angle(np.exp(1j * d)) if turn else d
+        d = plots.difference(a, b, t, ya, yb, turn)[mask]
         scale = float(np.max(np.abs(ya), initial=0.0))
         series.append(SeriesDiff(name, unit, float(np.max(np.abs(d), initial=0.0)),
                                  float(np.sqrt(np.mean(d**2))) if d.size else 0.0, scale))
 
     types = dict(zip(a.layout.joints, a.layout.joint_types, strict=True))
-    # a spatial joint's force and moment are 3-vectors: each component is a series
     spatial = a.layout.space == "spatial"
     for name in a.layout.drivers:
         unit = "N m" if a.layout.coordinate_unit(name) == "rad" else "N"
@@ -260,13 +256,8 @@ def compare(a: Result, b: Result, *, dt: float | None = None) -> Comparison:
         if types[name] not in ("spherical", "universal"):  # (no coordinate: zeros)
             add(f"joint {name} position", "rad" if rev else "m", ja.position, jb.position,
                 spatial and rev)
-        for k, c in enumerate("xyz" if spatial else "xy"):
-            add(f"joint {name} force {c}", "N", ja.force[:, k], jb.force[:, k])
-        if spatial:
-            for k, c in enumerate("xyz"):
-                add(f"joint {name} torque {c}", "N m", ja.torque[:, k], jb.torque[:, k])
-        else:
-            add(f"joint {name} torque", "N m", ja.torque, jb.torque)
+        for lab, unit, get in a.layout.joint_components():
+            add(f"joint {name} {lab}", unit, get(ja), get(jb))
     # A series whose scale is round-off against the largest series of its unit (a revolute
     # joint's torque, a force component along a frictionless guide) has no relative error.
     top: dict[str, float] = {}

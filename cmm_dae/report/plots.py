@@ -24,6 +24,17 @@ def _event_lines(ax, res: Result) -> None:
         ax.axvline(e.t, color="0.6", lw=0.6, ls=":")
 
 
+def difference(a: Result, b: Result, t: np.ndarray, ya: np.ndarray, yb: np.ndarray,
+               turn: bool = False) -> np.ndarray:
+    """``a``'s series ``ya`` less ``b``'s ``yb``, both resampled at the times ``t`` (s); a
+    spatial hinge's angle (``turn``), measured within pi of its range's middle, unwrapped to
+    resample and the difference wrapped into (-pi, pi]."""
+    if turn:
+        ya, yb = np.unwrap(ya), np.unwrap(yb)
+    d = a.resample(t, ya) - b.resample(t, yb)
+    return np.angle(np.exp(1j * d)) if turn else d
+
+
 def _unit(res: Result, joint: str) -> str:
     return res.layout.coordinate_unit(joint)
 
@@ -75,13 +86,7 @@ def joint_forces(results: list[Result], joint: str, path: Path) -> Path:
     """Constraint force components and torque of one joint vs time (paper Figs. 18-19)."""
     r0 = results[0]
     plt = pyplot()
-    if r0.layout.space == "spatial":  # 3-vectors in global axes, component by component
-        comps = [(f"{what} {x} [{unit}]", lambda j, w=what, k=k: getattr(j, w)[:, k])
-                 for what, unit in (("force", "N"), ("torque", "N m"))
-                 for k, x in enumerate("xyz")]
-    else:
-        comps = [("force x [N]", lambda j: j.force[:, 0]),
-                 ("force y [N]", lambda j: j.force[:, 1]), ("torque [N m]", lambda j: j.torque)]
+    comps = [(f"{lab} [{unit}]", get) for lab, unit, get in r0.layout.joint_components()]
     fig, axes = plt.subplots(len(comps), 1, figsize=(8, 2.5 * len(comps)), sharex=True)
     # Components that are zero in exact arithmetic (a revolute joint's torque) are drawn as
     # zero, not as 1e-26 round-off blown up by the axis scaling.
@@ -126,11 +131,8 @@ def differences(a: Result, b: Result, t: np.ndarray, mask: np.ndarray, path: Pat
         else:
             ya, yb = a.joint(n).position, b.joint(n).position
             unit, lab = _unit(a, n), f"joint {n} position"
-        turn = a.layout.space == "spatial" and unit == "rad" and kind != "driver"
-        if turn:  # a spatial hinge's angle: unwrapped to resample, the difference wrapped
-            ya, yb = np.unwrap(ya), np.unwrap(yb)
-        d = a.resample(t, ya) - b.resample(t, yb)
-        d = np.angle(np.exp(1j * d)) if turn else d
+        d = difference(a, b, t, ya, yb,
+                       a.layout.space == "spatial" and unit == "rad" and kind != "driver")
         ax.plot(t, np.where(mask, d, np.nan), color="k", lw=1.0)
         _event_lines(ax, a)
         ax.set_ylabel(f"diff [{unit}]")

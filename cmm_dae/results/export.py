@@ -29,19 +29,15 @@ def columns(res: Result) -> dict[str, np.ndarray]:
                                    "configuration index": res.configuration}
     lay = res.layout
     spatial = lay.space == "spatial"
+    parts = lay.joint_components()
     for name in lay.joints:
         u = lay.coordinate_unit(name)
         js = res.joint(name)
         cols[f"joint {name} position [{u}]"] = js.position
         cols[f"joint {name} velocity [{u}/s]"] = js.velocity
         cols[f"joint {name} acceleration [{u}/s^2]"] = js.acceleration
-        for k, x in enumerate("xyz" if spatial else "xy"):
-            cols[f"joint {name} force {x} [N]"] = js.force[:, k]
-        if spatial:  # (a 3-vector about the second body's connect point, global axes)
-            for k, x in enumerate("xyz"):
-                cols[f"joint {name} torque {x} [N m]"] = js.torque[:, k]
-        else:
-            cols[f"joint {name} torque [N m]"] = js.torque
+        for lab, unit, get in parts:
+            cols[f"joint {name} {lab} [{unit}]"] = get(js)
     for name in lay.drivers:
         u = "N m" if lay.coordinate_unit(name) == "rad" else "N"
         cols[f"driver {name} effort [{u}]"] = res.driver(name).effort

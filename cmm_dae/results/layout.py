@@ -8,8 +8,11 @@ lacks with its empty default."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
+
+import numpy as np
 
 __all__ = ["Layout"]
 
@@ -110,3 +113,15 @@ class Layout:
         """The unit of a joint's coordinate: "rad" (revolute, a cylindrical joint's angle),
         else "m"."""
         return "rad" if self.joint_type(joint) in ("revolute", "cylindrical") else "m"
+
+    def joint_components(self) -> list[tuple[str, str, Callable[[Any], np.ndarray]]]:
+        """A joint's reaction as series (reports, figures, columns): (name, unit, getter of
+        a ``JointSeries``) for the force's x and y and the torque, or in space the force's
+        and the torque's x, y and z (global axes)."""
+        if self.space != "spatial":
+            return [("force x", "N", lambda j: j.force[:, 0]),
+                    ("force y", "N", lambda j: j.force[:, 1]),
+                    ("torque", "N m", lambda j: j.torque)]
+        return [(f"{what} {x}", unit, lambda j, w=what, k=k: getattr(j, w)[:, k])
+                for what, unit in (("force", "N"), ("torque", "N m"))
+                for k, x in enumerate("xyz")]
