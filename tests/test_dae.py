@@ -50,7 +50,7 @@ def test_consistent_start_satisfies_all_levels():
     yp = np.concatenate([v, a, np.zeros(2 * model.m)])
     assert np.max(np.abs(np.asarray(model.res_fn(0.0, y, yp, p)))) <= 1e-12
     # the crank is at its driver's initial angle and turns at its speed
-    c, cd_, _ = model.coord_fn(q, v)
+    c, cd_, _ = model.coord_fn(q, v, p)
     assert float(c[0]) == pytest.approx(1.0, abs=1e-14)
     assert float(cd_[0]) == pytest.approx(2 * math.pi, rel=1e-13)
     # the next run's start is the one kept, as a copy of its own: changing it changes

@@ -65,11 +65,15 @@ def test_variants_share_their_lifted_functions():
     variants = [mech, cd.with_params(mech, {"joints.D.spring.stiffness": 0.7 * k}),
                 cd.with_params(mech, {"bodies.crank.points.B.x": 0.083}),
                 cd.with_params(mech, {"bodies.coupler.mass": 1.7, "gravity.y": -9.7})]
-    lifted = [{n: lift(f) for n, f in _functions(cd.Model(m)).items()} for m in variants]
-    for other in lifted[1:]:
+    models = [cd.Model(m) for m in variants]
+    lifted = [{n: lift(f) for n, f in _functions(model).items()} for model in models]
+    for model, other in zip(models[1:], lifted[1:], strict=True):
         assert all(other[n].fn.serialize() == lifted[0][n].fn.serialize() for n in other)
-        # and each reads its own numbers
-        assert any(not np.array_equal(other[n].values, lifted[0][n].values) for n in other)
+        # the mechanism's numbers are inputs at p's tail (equations.values), not constants:
+        # the same constants, each model its own values
+        assert all(np.array_equal(other[n].values, lifted[0][n].values) for n in other)
+        assert model.value_paths == models[0].value_paths
+        assert not np.array_equal(model.w0, models[0].w0)
     # a change of structure (a spring where there was none) is another function
     bare = cd.Model(cd.with_params(mech, {"joints.B.spring.stiffness": 2.0}))
     assert lift(bare.ida.res_sx).fn.serialize() != lifted[0]["res"].fn.serialize()

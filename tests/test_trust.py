@@ -419,12 +419,13 @@ def test_a_dotted_name_is_refused():
 def test_out_of_memory_building_the_model_is_said_as_such(monkeypatch):
     """Running out of memory while the equations are built was reported as a mechanism
     that cannot be assembled."""
-    from cmm_dae.simulation import runner
+    from cmm_dae.simulation import cache
 
     def no_memory(*a, **k):
         raise MemoryError("cannot allocate 12 GiB")
 
-    monkeypatch.setattr(runner, "Model", no_memory)
+    cache.clear()  # (no model kept from another test: this one is built)
+    monkeypatch.setattr(cache, "Model", no_memory)
     with pytest.raises(cd.CmmError, match="out of memory while building the equations of "
                        "'pendulum on a stop'") as info:
         cd.run_dae(cd.load(cd.example("pendulum_stop")), 0.1)

@@ -109,15 +109,15 @@ def names(mdl, mech) -> None:
 
 class Frame:
     """The symbols of a model under construction, ``q, v, a`` (nq,), ``t`` and ``p``
-    (n_params,), and its geometry: a body's angle and a body point's position in them.
-    Points and masses are read from the mechanism ``smech`` (whose parameters may be
-    symbols)."""
+    (n_params,: the mechanism's values at its tail), and its geometry: a body's angle
+    and a body point's position in them. Points and masses are read from the mechanism
+    ``smech``, whose values are those symbols (and the parameters theta)."""
 
-    def __init__(self, mdl, smech, n_params: int) -> None:
+    def __init__(self, mdl, smech, p: ca.SX) -> None:
         nq = mdl.nq
         self.q, self.v, self.a = (ca.SX.sym(x, nq) for x in ("q", "v", "a"))
         self.t = ca.SX.sym("t")
-        self.p = ca.SX.sym("p", n_params)
+        self.p = p
         self._mdl, self._smech = mdl, smech
         #: a spatial mechanism's geometry (equations.spatial), else None
         self.geo = spatial.Geometry(mdl, smech, self.q) if mdl.mech.spatial else None
@@ -219,7 +219,7 @@ def constraint_rows(mdl, fr: Frame, drop: tuple[int, ...]):
     mdl.base_sym = base
     if mdl.theta_paths:
         base = ca.substitute(base, mdl.theta, ca.DM(mdl.theta0))
-    mdl.base_fn = ca.Function("base", [q, t], [ca.densify(base)])
+    mdl.base_fn = ca.Function("base", [q, t, p], [ca.densify(base)])
     mdl.n_base = n_base
     keep = [i for i in range(len(rows)) if i not in mdl.dropped]
     rows = [rows[i] for i in keep]

@@ -88,10 +88,12 @@ def instructions(model: Model) -> float:
         return math.inf
 
     def count() -> int:
-        every = [*_functions(model).values(), *_singles(model).values()]
+        every = [*_functions(model.shared).values(), *_singles(model.shared).values()]
         return sum(f.n_instructions() for f in every)
 
-    return once(model, ("outputs instructions",), count)
+    # (counted on the structure's model: a variant holds its compiled functions, which
+    # cannot count them)
+    return once(model.shared, ("outputs instructions",), count)
 
 
 def use_compiled(model: Model, build: bool = True) -> bool:
@@ -100,6 +102,14 @@ def use_compiled(model: Model, build: bool = True) -> bool:
     with the model unchanged, where they are not built or cannot be, or are more than
     :data:`OUTPUTS_BUDGET` instructions."""
     if getattr(model, "outputs_compiled", False):
+        return True
+    if model.shared is not model:  # a variant: compiled once for its structure's model
+        if not use_compiled(model.shared, build):
+            return False
+        for attr in (*MAPPED, *SINGLE, "outputs_compiled"):
+            if hasattr(model.shared, attr):
+                setattr(model, attr, getattr(model.shared, attr))
+        model._maps = model.shared._maps
         return True
     if instructions(model) > OUTPUTS_BUDGET:
         return False

@@ -303,7 +303,7 @@ def redundant_rows(model: Model, q: np.ndarray, t: float, tol: float = 1e-9
     angle, which needs both rows of the pin; so are a spatial body's own six rows. The
     dependent rows are then picked among the others,
     projected on what the pins leave free; their number is the whole set's rank deficit."""
-    A = np.asarray(model.base_fn(q, t)).reshape(model.n_base, model.nq)
+    A = np.asarray(model.base_fn(q, t, model.params())).reshape(model.n_base, model.nq)
     if A.shape[0] == 0:
         return ()
     _, R, piv = qr(A.T, mode="economic", pivoting=True)

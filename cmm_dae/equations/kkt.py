@@ -49,14 +49,14 @@ class Symbolic:
     b: Any
     Phi_q: Any
     Qf: Any
-    mass: np.ndarray
+    mass: Any
     schur: bool
 
     def unpack(self, z) -> tuple[Any, Any]:
         """(q'', lambda) from a solution ``z`` of the system."""
         if self.schur:
-            return (self.Qf - self.Phi_q.T @ z) / ca.DM(self.mass), z
-        nq = self.mass.size
+            return (self.Qf - self.Phi_q.T @ z) / self.mass, z
+        nq = self.mass.numel()
         return z[:nq], z[nq:]
 
     def solve(self) -> tuple[Any, Any]:
@@ -71,12 +71,12 @@ def symbolic(model: Any, q, v, t, p, schur: bool = False) -> Symbolic:
     ``Phi_q M^-1 Q - gamma``, for the multipliers alone (m x m instead of nq + m)."""
     Phi_q, Qf, gamma = model.kkt_fn(q, v, t, p)
     free = model.free_fn(p)
+    mass = model.mass_fn(p)  # (the masses are values at p's tail)
     if schur:
-        PM = Phi_q @ ca.diag(ca.DM(1.0 / model.mass))
-        return Symbolic(PM @ Phi_q.T - ca.diag(free), PM @ Qf - gamma, Phi_q, Qf,
-                        model.mass, True)
-    return Symbolic(blocks(ca.DM(model.mass), Phi_q, free), ca.vertcat(Qf, gamma), Phi_q,
-                    Qf, model.mass, False)
+        PM = Phi_q @ ca.diag(1.0 / mass)
+        return Symbolic(PM @ Phi_q.T - ca.diag(free), PM @ Qf - gamma, Phi_q, Qf, mass, True)
+    return Symbolic(blocks(mass, Phi_q, free), ca.vertcat(Qf, gamma), Phi_q, Qf, mass,
+                    False)
 
 
 def solve_symbolic(A, b):

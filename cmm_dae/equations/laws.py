@@ -75,7 +75,7 @@ def callable_jacobian(model: Any, t: float, q: np.ndarray, v: np.ndarray
     the laws' own derivatives (central differences), which CasADi cannot see."""
     nq = model.nq
     dq, dv = np.zeros((nq, nq)), np.zeros((nq, nq))
-    c, cd, c_q, cd_q = model._rates_jac(q, v)
+    c, cd, c_q, cd_q = model._rates_jac(q, v, model._pw)
     for name, k in model.callables:
         hc, hd = 1e-6 * (1 + abs(c[k])), 1e-6 * (1 + abs(cd[k]))
         f_c = (callable_value(model.mech, name, t, c[k] + hc, cd[k])

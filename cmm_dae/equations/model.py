@@ -23,8 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..description.mechanism import Mechanism
-from ..description.params import param_value, symbolic
-from . import build, kkt, laws, reaction
+from . import build, kkt, laws, reaction, values
 from .build import Constraints, JointCoords, Row  # noqa: F401 (model.Row, as before)
 from .codegen import Buffered, compile_functions
 from .unknowns import Unknowns, ground_pins
@@ -63,27 +62,11 @@ class Model:
     def __init__(self, mech: Mechanism, *, compiled: bool = False, drop: tuple[int, ...] = (),
                  theta: Sequence[str] = (), pinned_angles: bool = True):
         self.mech = mech
-        #: model parameters (dotted paths, checked by the caller) kept as the symbols
-        #: ``theta`` in :attr:`sym` (the equations for sensitivities); the compiled
-        #: functions hold their values ``theta0``
-        self.theta_paths = tuple(theta)
-        self.theta = ca.SX.sym("theta", len(self.theta_paths))
-        self.theta0 = np.array([param_value(mech, x) for x in self.theta_paths])
-        smech = symbolic(mech, {x: self.theta[i] for i, x in enumerate(self.theta_paths)}) \
-            if self.theta_paths else mech
-        #: the mechanism with the parameters theta as symbols
-        self.smech = smech
-        build.names(self, mech)
-        nq, nl = self.nq, len(self.locks)
-        nz, nf, nu = len(self.zoned), len(self.frictional), len(self.callables)
-        fr = build.Frame(self, smech, 2 * nl + nz + nf + nu)
-        q, v, a, t, p = fr.q, fr.v, fr.a, fr.t, fr.p
-        self._u0 = 2 * nl + nz + nf
-        #: entries of ``p`` that make the configuration (the callable loads' values follow)
-        self.n_switches = self._u0
-        #: length of a configuration's parameter vector (lock switches and values, zones,
-        #: slip directions, callable load values)
-        self.n_params = int(p.numel())
+        p = values.parameters(self, mech, theta)  # (sets theta, value_paths, smech, ...)
+        smech = self.smech
+        nq = self.nq
+        fr = build.Frame(self, smech, p)
+        q, v, a, t = fr.q, fr.v, fr.a, fr.t
         self._sym = (q, v, t, p)
 
         c, phi, free = build.constraint_rows(self, fr, drop)
@@ -134,7 +117,7 @@ class Model:
         e = SimpleNamespace(q=q, v=v, a=a, t=t, p=p, lam=lam, y=y, yp=yp, phi=phi,
                             Phi_q=Phi_q, Phi_t=Phi_t, gamma=gamma, Qf=Qf, Qr=Qr, c=c,
                             cdot=cdot, c_q=c_q, cddot=cddot, P=P, powers=powers, free=free,
-                            F=ggl(Phi_q, Qf + Qr, phi, h, Mdiag), el_len=el_len,
+                            F=ggl(Phi_q, Qf + Qr, phi, h, Mdiag), mass=Mdiag, el_len=el_len,
                             el_rate=el_rate, el_ten=el_ten, load_val=load_val,
                             load_pow=load_pow)
         self._functions(e)
@@ -171,13 +154,14 @@ class Model:
         # (770 x 771 with 128 loops) took 0.5 of the model's 0.75 s
         self._lazy = {
             "phi_fn": lambda: mk("phi", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t)]),
-            "coord_fn": lambda: mk("coord", [q, v], [dn(c), dn(cdot), dn(c_q)]),
-            "_rates_jac": lambda: Buffered(mk("rates_jac", [q, v], [
+            "coord_fn": lambda: mk("coord", [q, v, p], [dn(c), dn(cdot), dn(c_q)]),
+            "_rates_jac": lambda: Buffered(mk("rates_jac", [q, v, p], [
                 dn(c), dn(cdot), dn(c_q), dn(ca.jacobian(cdot, q))])),
             "kin_fn": lambda: mk("kin", [q, t, p], [dn(phi), dn(Phi_q), dn(Phi_t), dn(c),
                                                    dn(c_q)]),
             "kkt_fn": lambda: mk("kkt", [q, v, t, p], [dn(Phi_q), dn(Qf), dn(gamma)]),
-            "post_fn": lambda: mk("post", [q, v, a, t], [dn(c), dn(cdot), dn(cddot), dn(P)]),
+            "post_fn": lambda: mk("post", [q, v, a, t, p], [dn(c), dn(cdot), dn(cddot),
+                                                          dn(P)]),
             #: one evaluation serving an event function: (c, cdot, Phi_q, Qf, gamma)
             "event_parts": lambda: Buffered(mk("evparts", [q, v, t, p], [
                 dn(c), dn(cdot), dn(Phi_q), dn(Qf), dn(gamma)])),
@@ -211,7 +195,9 @@ class Model:
         self._free = Buffered(self.free_fn)
         #: joint coordinates and rates (q, v) -> (c, cdot); also the symbolic base of
         #: IDA's event functions
-        self.cvel_fn = ca.Function("cvel", [q, v], [dn(c), dn(cdot)])
+        self.cvel_fn = ca.Function("cvel", [q, v, p], [dn(c), dn(cdot)])
+        #: the mass matrix's diagonal (nq,) of p (its values at p's tail)
+        self.mass_fn = ca.Function("mass", [p], [dn(e.mass)])
         self._cvel = Buffered(self.cvel_fn)
         #: the single-state KKT solves (equations.kkt)
         self._kkt = kkt.Solver(self, Phi_q.sparsity())
@@ -237,6 +223,13 @@ class Model:
         #: the symbolic residual (``res_fn`` may be replaced by a compiled one below), which
         #: :mod:`cmm_dae.integrators.csegment` generates C from with ``jac_sparse_fn``
         self.res_sx = self.res_fn
+
+    def variant(self, mech: Mechanism) -> Model:
+        """A model of ``mech``, a mechanism of this one's structure (the same
+        :func:`~.values.structure_key`: it differs at most in the values of
+        :attr:`value_paths` and its start), sharing this one's functions, their maps and
+        compiled libraries (:func:`.values.variant`)."""
+        return values.variant(self, mech)
 
     def __getattr__(self, name: str):
         # (only for attributes not set: the lazy single-state evaluators of _functions)
@@ -266,17 +259,17 @@ class Model:
 
     def joint_coords(self, q: np.ndarray, v: np.ndarray) -> JointCoords:
         """Joint coordinates, their rates and their Jacobian at (q, v)."""
-        return JointCoords(*self._coord(q, v))
+        return JointCoords(*self._coord(q, v, self._pw))
 
     def joint_rates(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joint coordinates (nj,) and rates (nj,) only (cheaper than :meth:`joint_coords`)."""
-        c, cd = self._cvel(q, v)
+        c, cd = self._cvel(q, v, self._pw)
         return c, cd
 
     def joint_accelerations(self, q: np.ndarray, v: np.ndarray, a: np.ndarray, t: float
                             ) -> np.ndarray:
         """Joint coordinate accelerations (nj,) from body accelerations ``a``."""
-        return self._post(q, v, a, t)[2]
+        return self._post(q, v, a, t, self._pw)[2]
 
     def kinematics(self, q: np.ndarray, t: float, p: np.ndarray
                    ) -> tuple[Constraints, np.ndarray, np.ndarray]:
@@ -301,6 +294,7 @@ class Model:
             p[2 * nl + self.zoned.index(name)] = 1.0
         for name, s in (slip or {}).items():
             p[self.slip_slot(name)] = float(s)
+        p[self.w_at:] = self.w0
         return p
 
     def slip_slot(self, joint: str) -> int:

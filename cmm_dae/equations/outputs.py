@@ -131,7 +131,7 @@ def series_function(model) -> ca.Function:
         drift = [sy["phi"], sy["h"]]
         if model.theta_paths:
             drift = ca.substitute(drift, [model.theta], [ca.DM(model.theta0)])
-        out = [*model.post_fn(q, v, a, t)[:3], *model.extras_fn(q, v, t, p), *drift]
+        out = [*model.post_fn(q, v, a, t, p)[:3], *model.extras_fn(q, v, t, p), *drift]
         fn = model.series_fn = ca.Function("series", [q, v, a, t, p],
                                            [ca.densify(x) for x in out])
     return fn

@@ -61,7 +61,7 @@ def for_model(model: Model, sparse: bool = False) -> csegment.CompiledModel | No
     if why is not None:
         _warn_once(f"compiled segment not used ({why}): running the Python path")
         return None
-    per_model = _models.setdefault(model, {})
+    per_model = _models.setdefault(model.shared, {})
     if not isinstance(per_model.get(sparse), csegment.CompiledModel):
         if per_model.get(sparse) is _BUILDING:
             _join()
@@ -94,7 +94,7 @@ def choose(model: Model, sparse: bool, mode: bool | str) -> csegment.CompiledMod
             csegment._driver_error = str(e)
             _warn_once(f"compiled segment not used ({e})")
             return None
-    per_model = _models.setdefault(model, {})
+    per_model = _models.setdefault(model.shared, {})
     got = per_model.get(sparse, _MISSING)
     if got is _MISSING:
         try:
@@ -158,11 +158,12 @@ def build_later(model: Model, sparse: bool, mode: bool | str, used: csegment.Com
     if mode != "auto" or used is not None or _unsupported(model) is not None \
             or not auto_builds() or csegment._driver_error is not None:
         return
-    per_model = _models.setdefault(model, {})
+    per_model = _models.setdefault(model.shared, {})
     if per_model.get(sparse, _MISSING) is not _MISSING:
         return  # built, building or failed
-    est, _spent[model] = build_estimate(model), _spent.get(model, 0.0) + seconds
-    if _spent[model] < max(AUTO_BUILD_AFTER, 2.0 * est):
+    key = model.shared
+    est, _spent[key] = build_estimate(model), _spent.get(key, 0.0) + seconds
+    if _spent[key] < max(AUTO_BUILD_AFTER, 2.0 * est):
         return
     per_model[sparse] = _BUILDING
     if not _noticed:
@@ -180,7 +181,7 @@ def build_later(model: Model, sparse: bool, mode: bool | str, used: csegment.Com
 
 
 def _build(model: Model, sparse: bool) -> None:
-    per_model = _models.setdefault(model, {})
+    per_model = _models.setdefault(model.shared, {})
     try:
         per_model[sparse] = csegment.CompiledModel(model, sparse)
     except (OSError, subprocess.SubprocessError, RuntimeError):

@@ -210,7 +210,7 @@ class CompiledModel:
         got = self._events.get(key)
         if got is None:
             at = self.model.n_params + self.values.size
-            lean_l = lift(lean, None, at)  # its p: an input of its own, constants only
+            lean_l = lift(lean, 1, at)  # (p with the constants at its tail, as for res)
             funcs, values = [ca.Function("cmm_ev", lean_l.fn.sx_in(),
                                          lean_l.fn.call(lean_l.fn.sx_in()))], [lean_l.values]
             if exact:

@@ -140,7 +140,7 @@ def _parts(model: Model, hs: ev.HybridState, kidx: list[int], act: list[int],
     S = ca.SX.sym
     q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
     h = tn - t
-    c, cd, cdd, _ = model.post_fn(q, v, a, t)
+    c, cd, cdd, _ = model.post_fn(q, v, a, t, p)
     tar, rates = S("tar", nk), S("rates", nk)
     phi, Phi_q, Phi_t, cz, c_q = model.kin_fn(q, tn, p)
     g = ca.vertcat(rows(phi, act), coordinates.residual(rows(cz, kidx), tar,
@@ -150,7 +150,7 @@ def _parts(model: Model, hs: ev.HybridState, kidx: list[int], act: list[int],
     v1 = ca.solve(jac, ca.vertcat(-rows(Phi_t, act), rates))
     system = kkt.symbolic(model, q, v1, tn, p, schur=schur)
     acc, lam = system.unpack(ca.solve(system.A, system.b))
-    c1, cd1 = model.cvel_fn(q, v1)
+    c1, cd1 = model.cvel_fn(q, v1, p)
     vals: list = [None] * len(triggers)
     ev.event_values(hs, c1, cd1, lam, triggers, vals, where=ca.if_else)
     return {

@@ -66,7 +66,7 @@ def exact_parts(model: Model, hs: ev.HybridState, triggers: list[ev.Trigger]) ->
     q, v, _ = model.ida.symbolic(y)
     system = kkt.symbolic(model, q, v, t, p)
     lam = ca.SX.sym("lam", model.m)
-    c, cd = model.cvel_fn(q, v)
+    c, cd = model.cvel_fn(q, v, p)
     vals: list = [None] * len(triggers)
     ev.event_values(hs, c, cd, lam, triggers, vals, where=ca.if_else)
     return ExactParts(ca.Function("cmm_kkt", [t, y, p], [system.A, system.b]),

@@ -125,9 +125,9 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         fn = self._ev_cache.get(key)
         if fn is None:
             def build() -> ca.Function:
-                y = ca.SX.sym("y", self.u.N)
+                y, p = ca.SX.sym("y", self.u.N), ca.SX.sym("p", model.n_params)
                 q, v, lam = self.u.symbolic(y)
-                c, cd = model.cvel_fn(q, v)
+                c, cd = model.cvel_fn(q, v, p)
                 vals: list = [None] * len(self.triggers)
                 ev.event_values(hs, c, cd, lam, self.triggers, vals, where=ca.if_else)
                 near = ca.SX(1.0)
@@ -135,7 +135,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                     push = ca.vertcat(*[vals[i] for i in self.push_idx])
                     near = ca.mmin(ca.fabs(push)) - (PUSH_MARGIN * ca.mmax(ca.fabs(lam))
                                                      + 100.0 * ATOL_LAMBDA * k)
-                return ca.Function("events", [y], [ca.vertcat(1.0, *vals), near])
+                return ca.Function("events", [y, p], [ca.vertcat(1.0, *vals), near])
 
             # built once per model and configuration (the next run of the model meets the
             # same ones); wrapped per run, whose buffers it writes
@@ -288,6 +288,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         self.ev_near = np.zeros(1)
         self.ev_fn = self._event_function()
         self.ev_fn.bind(0, self.y_in)
+        self.ev_fn.bind(1, self.p)
         self.ev_fn.bind_out(0, self.ev_out)
         self.ev_fn.bind_out(1, self.ev_near)
         self.start_state = (q, t0, self.p.copy())  # (its ratio: 1.4 ms with 32 loops)

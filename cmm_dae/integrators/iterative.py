@@ -102,8 +102,8 @@ class _CompiledStep:
         S = ca.SX.sym
         q, v, a, t, tn, p = S("q", nq), S("v", nq), S("a", nq), S("t"), S("tn"), S("p", npar)
         h = tn - t
-        c, cd, cdd, _ = model.post_fn(q, v, a, t)
-        pre = ca.Function("pre", [q, v, a, t, tn], [
+        c, cd, cdd, _ = model.post_fn(q, v, a, t, p)
+        pre = ca.Function("pre", [q, v, a, t, tn, p], [
             q + v * h, rows(c, kidx) + rows(cd, kidx) * h,  # the previous instant's rates
             rows(cd, kidx) + rows(cdd, kidx) * h])
         tar = S("tar", nk)
@@ -120,7 +120,7 @@ class _CompiledStep:
         kkt_fn = ca.Function("kkt", [q, v, tn, p], [system.A, system.b])
         sol = S("sol", system.b.numel())
         acc, lam = system.unpack(sol)
-        c1, cd1 = model.cvel_fn(q, v)
+        c1, cd1 = model.cvel_fn(q, v, p)
         vals: list = [None] * len(triggers)
         ev.event_values(hs, c1, cd1, lam, triggers, vals, where=ca.if_else)
         fin = ca.Function("fin", [q, v, tn, p, sol], [acc, ca.vertcat(0.0, *vals)])
@@ -131,7 +131,7 @@ class _CompiledStep:
             "linear_solver": "lapacklu"})  # LU with partial pivoting, as numpy.linalg.solve
         M = ca.MX.sym
         q, v, a, t, tn, p = M("q", nq), M("v", nq), M("a", nq), M("t"), M("tn"), M("p", npar)
-        q0, targets, rates = pre(q, v, a, t, tn)
+        q0, targets, rates = pre(q, v, a, t, tn, p)
         q1 = newton(q0, tn, p, targets)
         r, J, rhs = vel(q1, tn, p, targets, rates)
         v1 = kkt.solve_symbolic(J, rhs)

@@ -33,7 +33,7 @@ def _min_norm_reactions(model: Model, t: np.ndarray, q: np.ndarray, lam: np.ndar
     SVD a sample (the Bennett linkage's 38 x 36: half of its run). Near a singular position,
     where that Gram matrix is ill-conditioned, the pseudo-inverse is used."""
     n, nb = t.size, model.n_base
-    B = np.asarray(model.mapped("base_fn", n)(q.T, t)).reshape(nb, n, model.nq).transpose(
+    B = np.asarray(model.mapped("base_fn", n)(q.T, t, P.T)).reshape(nb, n, model.nq).transpose(
         1, 0, 2)
     nkeep = nb - len(model.dropped)
     keep = np.array([i for i in range(nb) if i not in model.dropped], dtype=int)

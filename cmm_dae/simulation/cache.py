@@ -26,8 +26,11 @@ import numpy as np
 
 from ..description.mechanism import Mechanism
 from ..equations.model import Model
+from ..equations.values import structure_key, value_paths
+from ..hybrid.start import redundant_base_rows
 
-__all__ = ["MODELS_KEPT", "clear", "model_of"]
+__all__ = ["MODELS_KEPT", "STRUCTURES_KEPT", "built", "clear", "model_of", "shared_model",
+           "structure_of", "without_redundant"]
 
 #: How many mechanisms' models are kept (the least recently run goes first).
 MODELS_KEPT = 4
@@ -85,6 +88,53 @@ def model_of(mech: Mechanism, build: Callable[[Mechanism], Model]) -> Model:
     return model
 
 
+#: How many structures' models :func:`shared_model` keeps (the least recently used first
+#: out): a sweep's variants share one; a study of a few mechanisms keeps each of theirs.
+STRUCTURES_KEPT = 4
+
+_structures: OrderedDict[tuple[str, tuple[int, ...]], Model] = OrderedDict()
+
+
+def structure_of(mech: Mechanism) -> str:
+    """``mech``'s structure key (:func:`~cmm_dae.equations.values.structure_key`)."""
+    return structure_key(mech, value_paths(mech))
+
+
+def shared_model(mech: Mechanism, key: str, drop: tuple[int, ...],
+                 build: Callable[[], Model]) -> Model:
+    """A model of ``mech`` (structure ``key``, redundant rows ``drop`` left out): a
+    :meth:`~cmm_dae.equations.model.Model.variant` of the one built for a mechanism of
+    the same structure, or ``build()``, kept for the next."""
+    base = _structures.get((key, drop))
+    if base is not None:
+        _structures.move_to_end((key, drop))
+        return base if base.mech is mech else base.variant(mech)
+    model = build()
+    _structures[(key, drop)] = model
+    while len(_structures) > STRUCTURES_KEPT:
+        _structures.popitem(last=False)
+    return model
+
+
 def clear() -> None:
     """Forget every kept model."""
     _models.clear()
+    _structures.clear()
+
+
+def without_redundant(model: Model) -> Model:
+    """The model itself, or, for a redundant constraint set, the equations without the
+    dependent rows."""
+    drop = redundant_base_rows(model)
+    return Model(model.mech, drop=drop) if drop else model
+
+
+def built(mech: Mechanism) -> Model:
+    """A model of ``mech`` (redundant rows left out), as a run uses it: a variant of the
+    one of a mechanism of the same structure (:func:`shared_model`), or built."""
+    key = structure_of(mech)
+    model = shared_model(mech, key, (), lambda: Model(mech))
+    drop = redundant_base_rows(model) if model.m > 0 else ()
+    if not drop:
+        return model
+    return shared_model(mech, key, drop, lambda: Model(mech, drop=drop))

@@ -28,13 +28,13 @@ from ..description.structure import force_constraint_joints, labeller
 from ..equations.model import Model
 from ..hybrid import policy as ev
 from ..hybrid.equilibrium import solve_equilibrium
-from ..hybrid.start import redundant_base_rows, start_state
+from ..hybrid.start import start_state
 from ..integrators.contract import Integrator, Recorder, RunOptions
 from ..integrators.ida import IdaIntegrator
 from ..integrators.iterative import IterativeIntegrator
 from ..results.post import build_result
 from ..results.result import Result
-from .cache import model_of
+from .cache import built, model_of, without_redundant
 from .crossing import cross_singular, drop_twin_passage, log_stepped_over
 from .options import IDA_DEFAULTS, ITERATIVE_DEFAULTS, branch_rule, check_options
 from .passage import passage_cut, watch_segment
@@ -266,9 +266,9 @@ def _start(mech: Mechanism, model: Model | None) -> tuple:
         model = None  # the solved parameters are compiled into the model: build it anew
     try:
         if model is None:  # built (or kept) without its redundant rows
-            model = model_of(mech, _build)
+            model = model_of(mech, built)
         elif not model.dropped and model.m > 0:  # the caller's: as a run builds it
-            model = _without_redundant(model)
+            model = without_redundant(model)
         # (the labels' structure analysis once per model; in space, its rank's mobility)
         hs = ev.HybridState(model, once(model, ("labeller",), lambda: labeller(
             mech, mobility=model.mobility if mech.spatial else None)),
@@ -342,19 +342,6 @@ def _apply(done: list, t: float, q: np.ndarray, v: np.ndarray, events: list, rec
                               f"(last: {e.kind} of joint {e.joint})", status=Status.MAX_EVENTS)
     integ.after_events(done)
     return q, v
-
-
-def _without_redundant(model: Model) -> Model:
-    """The model itself, or, for a redundant constraint set, the equations without the
-    dependent rows."""
-    drop = redundant_base_rows(model)
-    return Model(model.mech, drop=drop) if drop else model
-
-
-def _build(mech: Mechanism) -> Model:
-    """A new model of ``mech`` (redundant rows left out), as a run uses it."""
-    model = Model(mech)
-    return _without_redundant(model) if model.m > 0 else model
 
 
 def _out_of_memory(mech: Mechanism, e: BaseException) -> CmmError:

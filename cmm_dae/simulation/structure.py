@@ -48,7 +48,7 @@ def structure(mech: Mechanism, *, budget: int = SEARCH_BUDGET) -> Structure:
     known = {k: v for k, v in mech.initial.joints.items() if k not in mech.drivers}
     q = assemble_positions(model, 0.0, model.params(), known, initial_guess(model))
     drop = redundant_base_rows(model)
-    A = np.asarray(model.base_fn(q, 0.0)).reshape(model.n_base, model.nq)
+    A = np.asarray(model.base_fn(q, 0.0, model.params())).reshape(model.n_base, model.nq)
     rows = [i for i, r in enumerate(model.all_rows[:model.n_base]) if r.kind != "driver"]
     mobility = model.nq - rank.rank(A[rows]) if rows else model.nq
     return Structure(mech.name, int(mobility), tuple(mech.drivers), (),
