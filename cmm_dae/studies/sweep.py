@@ -257,9 +257,9 @@ def sweep(mech: Mechanism, params: Mapping[str, Iterable[float]] | list[Mapping[
         A progress bar on stderr (default: for 20 or more cases on a terminal).
     **run_options
         Passed to :func:`cmm_dae.simulate` (method, rtol, atol, output_dt, dt, ...).
-        The variants share their structure's compiled libraries (their numbers are inputs
-        of the generated code): the first run of the mechanism builds them, the others
-        load them (one build per structure, not per variant).
+        The variants share their structure's model (the mechanism's values are inputs
+        of its functions and of the generated code): the first run builds it, the others
+        run on it (one build per structure, not per variant).
 
     Returns
     -------
