@@ -27,6 +27,7 @@ import numpy as np
 import sksundae  # loads the SUNDIALS libraries into the process before the driver
 from sksundae._cy_ida import IDAMESSAGES
 
+from ..core.memo import once
 from ..core.progress import Bar
 from ..equations import banded, compiled
 from ..equations.codegen import addresses, build_library, function_key
@@ -181,8 +182,11 @@ class CompiledModel:
         # the residual and Jacobian read the mechanism's numbers from p's tail
         # (:mod:`~cmm_dae.equations.lifting`): one library per structure, not per value
         n_p = model.n_params
-        lres = lift(res, 3)
-        ljac = lift(jac, 4, n_p + lres.values.size)
+        # (lifted once per structure: reading a large model's instructions took half of
+        # a warm 2-s run of A02 with 128 loops, asked again at every run whose library
+        # was not built yet)
+        lres, ljac = once(model.shared, ("segment lifted",), lambda: (
+            (lr := lift(res, 3)), lift(jac, 4, n_p + lr.values.size)))
         #: the constants p's tail carries for the residual and the Jacobian
         self.values = np.concatenate([lres.values, ljac.values])
         funcs = [lres.fn, ljac.fn]
