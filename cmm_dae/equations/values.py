@@ -137,12 +137,15 @@ def variant(model: Any, mech: Mechanism) -> Any:
     """A model of ``mech``, which has ``model``'s structure (:func:`structure_key`),
     sharing its functions, their maps and compiled libraries: only what holds the
     values is its own (the numeric records and masses, the values at p's tail, the KKT
-    solver's matrices, the caches of its runs: a start, the structure's checks)."""
+    solver's matrices, the caches of its runs: a start, the structure's checks), but for
+    a mechanism equal to ``model``'s in everything (a file loaded again), whose runs share
+    those caches too."""
     new = copy.copy(model)
-    for cache in ("_once", "_recent"):
-        new.__dict__.pop(cache, None)
     new.mech = mech
     new.w0 = np.array([param_value(mech, x) for x in model.value_paths], dtype=float)
+    if not (np.array_equal(new.w0, model.w0) and mech.initial == model.mech.initial):
+        for cache in ("_once", "_recent"):  # (else the same mechanism: its start too)
+            new.__dict__.pop(cache, None)
     new._pw = np.concatenate([np.zeros(model.w_at), new.w0])
     build.names(new, mech)  # the numeric records and masses (its smech is the shared one)
     new._kkt = kkt.Solver(new, model.phi_q_pattern)
