@@ -106,3 +106,18 @@ def test_a_change_of_structure_builds_its_own_model():
         _same(shared, fresh)
     assert "joints.E.limits.upper" not in value_paths(base)
     assert "bodies.crank.points.B.y" not in value_paths(base)  # (zero at the base)
+
+
+def test_a_variant_of_another_structure_is_refused():
+    """``Model.variant`` of a mechanism whose structure differs (gravity along x where
+    the model's has none, a stop moved) raises, naming the mechanism, instead of running
+    it with the model's numbers; one that differs in values only runs as its own."""
+    base = cd.load(cd.example("double_folded"))
+    model = cd.Model(base)
+    for case in ({"gravity.x": 1.0}, {"joints.E.limits.upper": 0.25}):
+        with pytest.raises(cd.ModelError, match="has another structure than the model's"):
+            model.variant(cd.with_params(base, case))
+    var = cd.with_params(base, {"gravity.y": -9.0})
+    cache.clear()
+    _same(cd.run_dae(var, 3.0, model=model.variant(var), compiled=False),
+          cd.run_dae(var, 3.0, compiled=False))

@@ -141,7 +141,7 @@ def path_problem(mech: Mechanism, path: str) -> Problem | None:
     ref = _point_ref(mech, parts)
     if ref is not None:
         return None if _point_used(mech, ref) else Problem(
-            "sweep", path, f"has no effect: no joint, force element or load is attached at "
+            "parameters", path, f"has no effect: no joint, force element or load is attached at "
             f"point '{ref}'")
     if _tensor_entry(mech, parts) is not None:
         return None

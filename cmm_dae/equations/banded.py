@@ -175,12 +175,14 @@ _cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def for_model(model) -> BandedSchur | None:
-    """:func:`structure` of a model's Phi_q pattern (computed once per model)."""
-    if model not in _cache:
+    """:func:`structure` of a model's Phi_q pattern (computed once per structure: a zero
+    mass is part of it)."""
+    key = model.shared
+    if key not in _cache:
         rows, cols = model.phi_q_pattern.get_triplet()
-        _cache[model] = (structure(np.asarray(rows, int), np.asarray(cols, int), model.m)
-                         if np.all(model.mass > 0.0) else None)
-    return _cache[model]
+        _cache[key] = (structure(np.asarray(rows, int), np.asarray(cols, int), model.m)
+                       if np.all(model.mass > 0.0) else None)
+    return _cache[key]
 
 
 def batch_from_nonzeros(model: Any, t: np.ndarray, q: np.ndarray, v: np.ndarray, P: np.ndarray,

@@ -27,7 +27,7 @@ def active_nonzeros(model: Model, act: np.ndarray, every: bool = False
     rows unless ``every``): the dense matrix's took 4.3 of 25 s on A02 with 64 loops."""
     if act.size < banded.BANDED_FROM and not every:
         return None
-    per_model = _STRUCTURES.setdefault(model, {})
+    per_model = _STRUCTURES.setdefault(model.shared, {})  # (a pattern: the structure's)
     key = act.tobytes()
     if key not in per_model:
         pat = model.phi_q_pattern
@@ -47,7 +47,7 @@ def active_nonzeros(model: Model, act: np.ndarray, every: bool = False
 def _csc_index(model: Model, act: np.ndarray) -> np.ndarray:
     """Where the active rows' nonzeros, in :func:`active_nonzeros`' order (which must have
     found them), are among Phi_q's nonzeros in ``model.phi_q_nz_fn``'s CSC order."""
-    return _STRUCTURES[model][("csc", act.tobytes())]
+    return _STRUCTURES[model.shared][("csc", act.tobytes())]
 
 
 def active_values_at(model: Model, act: np.ndarray, q: np.ndarray, t: float,
@@ -170,7 +170,7 @@ def _kept(model: Model, act: np.ndarray, kind: str, build):
     nz = active_nonzeros(model, act)
     if nz is None:
         return None
-    per_model = _STRUCTURES[model]  # filled by active_nonzeros
+    per_model = _STRUCTURES[model.shared]  # filled by active_nonzeros
     key = (kind, act.tobytes())
     if key not in per_model:
         per_model[key] = build(*nz)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..description.mechanism import Mechanism
 from ..equations.model import Model
-from ..equations.values import structure_key, value_paths
+from ..equations.values import structure_key, value_paths, variant
 from ..hybrid.start import redundant_base_rows
 
 __all__ = ["MODELS_KEPT", "STRUCTURES_KEPT", "built", "clear", "model_of", "shared_model",
@@ -108,7 +108,7 @@ def shared_model(mech: Mechanism, key: str, drop: tuple[int, ...],
     base = _structures.get((key, drop))
     if base is not None:
         _structures.move_to_end((key, drop))
-        return base if base.mech is mech else base.variant(mech)
+        return base if base.mech is mech else variant(base, mech, key)
     model = build()
     _structures[(key, drop)] = model
     while len(_structures) > STRUCTURES_KEPT:

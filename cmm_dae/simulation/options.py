@@ -73,9 +73,11 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
                            f"{compiled!r}"))
     if model is not None and getattr(model, "mech", None) != mech:
         name = getattr(getattr(model, "mech", None), "name", type(model).__name__)
-        bad.append(Problem("run", "model", f"a model of another mechanism ({name!r}), not "
-                           f"of {mech.name!r}: build it with cmm_dae.Model(mech) of this "
-                           "one"))
+        what = (f"of another mechanism ({name!r})" if name != mech.name else
+                f"of another mechanism of the same name ({name!r}: a value differs)")
+        bad.append(Problem("run", "model", f"a model {what}, not of this one: build it with "
+                           "cmm_dae.Model(mech), or take model.variant(mech) where only "
+                           "values that are inputs differ"))
 
     def need(ok: bool, key: str, msg: str, value: Any) -> bool:
         if not ok:
