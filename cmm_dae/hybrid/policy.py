@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from ..core.records import Event, EventKind, Side
-from ..description.parts import STOP_TOL, stop_tolerance
+from ..description.parts import stop_tolerance
 from ..equations.kinematics import (
     dependent_rows,
     project_positions,
@@ -115,10 +115,7 @@ def event_values(hs: HybridState, c, cdot, lam, triggers: list[Trigger], out,
         elif tr.kind == TK.GAP:
             k = jidx[tr.joint]
             L = hs.limit_value(tr.joint, tr.side)
-            # (a stop's L is a symbol in sensitivities: where(), not max())
-            x = hs.gap_band[0] * abs(L) + hs.gap_band[1]
-            y = STOP_TOL * where(abs(L) > 1.0, abs(L), 1.0)
-            band = where(x > y, x, y)
+            band = hs.stop_band(L, where)
             if tr.side == "lower":
                 out[i] = where(cdot[k] > 0.0, where(c[k] - L > -band, 1.0, c[k] - L), c[k] - L)
             else:

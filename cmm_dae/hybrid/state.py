@@ -19,6 +19,7 @@ import numpy as np
 
 from ..core.errors import SolverError, Status
 from ..core.records import Configuration, Event, Side
+from ..description.parts import STOP_TOL
 from ..equations import rank, reaction
 from ..equations.build import SLIDE
 from ..equations.model import Model
@@ -155,6 +156,15 @@ class HybridState:
     gap_band: tuple[float, float] = (0.0, math.inf)
     _index: dict[tuple, int] = field(default_factory=dict)
     _trial: dict[tuple, np.ndarray] = field(default_factory=dict)
+
+    def stop_band(self, L, where: Callable = np.where):
+        """How far beyond its stop at ``L`` a joint must be to read as beyond it (m or rad):
+        what the integrator resolves there (``gap_band[0] |L| + gap_band[1]``), at least
+        the stop tolerance. ``where``: numpy's or CasADi's (a stop is a symbol in
+        sensitivities: ``where``, not ``max``)."""
+        x = self.gap_band[0] * abs(L) + self.gap_band[1]
+        y = STOP_TOL * where(abs(L) > 1.0, abs(L), 1.0)
+        return where(x > y, x, y)
 
     def limit_value(self, joint: str, side: str) -> float:
         if side == "stick":

@@ -107,6 +107,7 @@ def driver(build: bool = True) -> ctypes.CDLL:
         lib.cmm_seg_extremes.restype, lib.cmm_seg_extremes.argtypes = None, [_P, _D, _D, _D]
         lib.cmm_seg_crawl.restype, lib.cmm_seg_crawl.argtypes = None, [_P, x, n, c_long, x]
         lib.cmm_seg_first.restype, lib.cmm_seg_first.argtypes = None, [_P, x]
+        lib.cmm_seg_dips.restype, lib.cmm_seg_dips.argtypes = n, [_P, _D]
         _driver = lib
     return _driver
 
@@ -244,7 +245,7 @@ class CompiledModel:
             relaxed: bool, events: tuple, n_triggers: int, progress: Bar | None = None,
             band: bool = False, suppress: bool = True, onestep: bool = False,
             watch: np.ndarray | None = None, crawl: tuple | None = None,
-            first_tout: float = 0.0) -> SegmentRun:
+            first_tout: float = 0.0, dips: np.ndarray | None = None) -> SegmentRun:
         """One segment from ``tspan[0]`` to ``tspan[-1]``: IDA's steps with ``onestep``,
         else the samples at ``tspan[1:]``; stops at the first root (all are terminal).
         ``events``: the configuration's :meth:`event_functions`; ``band``: a sparse
@@ -253,7 +254,9 @@ class CompiledModel:
         ``watch``: entries of y whose extremes over IDA's steps are returned; ``crawl``:
         (crawl step s, steps in place, slow steps, natural step s) of the crawl test;
         ``first_tout``: the tout of IDA's first call, s (its first step is a thousandth of
-        the way there; 0: the segment's end)."""
+        the way there; 0: the segment's end); ``dips``: per event function the depth a
+        gap that dipped beyond its stop inside a step must reach (:mod:`.dips`; NaN:
+        not a gap; None: no search)."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events.ev, events.evx
@@ -276,6 +279,11 @@ class CompiledModel:
         if not seg:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
         lib.cmm_seg_first(seg, D(first_tout))
+        dips_ = None if dips is None else np.ascontiguousarray(dips, dtype=float)
+        if dips_ is not None and np.any(~np.isnan(dips_)) \
+                and lib.cmm_seg_dips(seg, dips_.ctypes.data_as(_D)) != 0:
+            lib.cmm_seg_free(seg)
+            raise RuntimeError("the event functions failed at the segment's start")
         if crawl is not None:
             lib.cmm_seg_crawl(seg, D(crawl[0]), int(crawl[1]), int(crawl[2]), D(crawl[3]))
         # IDA's coordinates, rates and works are recorded (the differential unknowns)

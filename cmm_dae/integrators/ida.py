@@ -26,7 +26,7 @@ from ..equations.kinematics import singular_ratio
 from ..equations.model import Buffered, Model
 from ..hybrid import policy as ev
 from ..singular.step import PAST_RATIO, leaves_singular
-from . import cbuild
+from . import cbuild, dips
 from .contract import Integrator, Recorder, RunOptions, SegmentEnd
 from .extremes import driver_watch, keep_extremes
 from .ida_callbacks import IdaCallbacks
@@ -282,6 +282,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             self.lambda_scale, self._scaled = scale, True  # functions' lock forces are
             self._lambda_atol()  # measured in it)
         trig = self.triggers = ev.event_list(model, hs.locked)
+        self.dips = dips.depths(hs, trig)  # (gaps that dip inside a step: dips.py)
         self.push_idx = np.flatnonzero([tr.kind in ev.LOCK_FORCES for tr in trig])
         self.has_push = self.push_idx.size > 0
         self.ev_out = np.zeros(1 + len(self.triggers))  # [always positive, triggers]
@@ -375,9 +376,14 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             else:
                 with quiet_sundials():
                     start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
+                    search = bool(np.any(~np.isnan(self.dips)))
+                    g0 = np.empty(self.dips.size)
+                    if search:
+                        self._events(float(tspan[0]), y0, yp0, g0)
                     r = _own_steps(solver, tspan, y0, yp0, self._interrupt,
                                    self.opts.output_dt is not None, self.watch,
-                                   self.u.lam.start, self._trap, self._after_step)
+                                   self.u.lam.start, self._trap, self._after_step,
+                                   self._dip if search else None, g0)
                 self.n_steps = r.steps  # (IDA's count with the last step, as in C)
         except CmmError:
             raise

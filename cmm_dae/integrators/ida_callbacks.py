@@ -10,7 +10,7 @@ import numpy as np
 from ..core.memo import once
 from ..equations.model import Buffered
 from ..hybrid import policy as ev
-from . import csegment
+from . import csegment, dips
 from .exact_events import exact_parts
 from .ida_steps import (
     IN_PLACE_STEPS,
@@ -81,6 +81,19 @@ class IdaCallbacks:
         if self.opts.progress is not None:
             self.opts.progress.update(t)
         return self.crawled or self.stalled
+
+    def _dip(self, t0: float, t1: float, g0: np.ndarray, y1: np.ndarray, dky
+             ) -> tuple[tuple[float, int] | None, np.ndarray]:
+        """After a step of the Python path from t0 to t1 (event values ``g0`` at t0, y1 at
+        t1, ``dky`` its interpolant): the first gap that dipped beyond its stop inside it
+        (:func:`.dips.locate`, as ``segment.c`` after each step), and the values at t1."""
+        def g_at(t: float, y: np.ndarray | None = None) -> np.ndarray:
+            out = np.empty(1 + len(self.triggers))
+            self._events(t, dky(t) if y is None else y, None, out)
+            return out
+
+        g1 = g_at(t1, y1)
+        return dips.locate(t0, t1, g0, g1, self.dips, g_at), g1
 
     def _events(self, t, y, yp, out):
         out[0] = 1.0  # (below zero only to end the segment: a Ctrl-C, an exception)
@@ -173,7 +186,8 @@ class IdaCallbacks:
                        onestep=self.opts.output_dt is None,
                        watch=self.watch, crawl=(self.crawl_step, IN_PLACE_STEPS, SLOW_STEPS,
                                                 self.h_natural),
-                       first_tout=first_tout(float(tspan[0]), float(tspan[-1])))
+                       first_tout=first_tout(float(tspan[0]), float(tspan[-1])),
+                       dips=self.dips)
         self.n_steps = r.steps
         self.stalled, self.interrupted, self.trapped = r.stalled, r.interrupted, r.trapped
         self.crawled = r.crawled

@@ -195,7 +195,7 @@ def first_tout(t0: float, t_stop: float) -> float:
 def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                interrupted=lambda: None, grid: bool = False,
                watch: np.ndarray | None = None, ncol: int = 0, trapped=lambda: None,
-               after_step=lambda t, nst: False):
+               after_step=lambda t, nst: False, dip=None, g0: np.ndarray | None = None):
     """IDA stepping on its own from tspan[0] to tspan[-1] (the end as stop time; a root,
     the stop time or a failure ends it): its steps, or with ``grid`` the output times
     ``tspan[1:]`` read from IDA's interpolant after the step that passes them (and the
@@ -207,13 +207,17 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
     steps ends it as a root would, ``interrupted()`` told, the samples so far kept. The
     extremes of the entries ``watch`` of y over the steps come back as ``extremes``. IDA
     stuck at order 1 (:class:`~.suppress.TrapCheck`) ends it too, ``trapped()`` told, as
-    does ``after_step(t, nst)`` returning True (given each step's end and IDA's count)."""
+    does ``after_step(t, nst)`` returning True (given each step's end and IDA's count).
+    ``dip(t0, t1, g0, y1, dky) -> (found, g1)``, where given, looks for a gap that dipped
+    beyond its stop inside each step (:mod:`.dips`; ``g0``: the event values at the
+    start): one found ends the segment there as a root would."""
     t_end = float(tspan[-1])
     first = solver.init_step(float(tspan[0]), y0, yp0)
     ts, ys = [first.t], [first.y]
     x, nxt = first, 1
     watch = np.zeros(0, int) if watch is None else watch
-    dky = Interpolant(solver, y0.size) if grid or watch.size else None
+    dky = Interpolant(solver, y0.size) if grid or watch.size or dip is not None else None
+    t_prev = float(tspan[0])
     track = Tracker(watch, ncol, dky, float(tspan[0]))
     trap, nst = TrapCheck(solver), 0
     try:
@@ -222,11 +226,21 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
             x = solver.step(t_end if nst else first_tout(float(tspan[0]), t_end),
                             method="onestep", tstop=t_end)
             nst += 1
+            dipped = False
+            if x.status in (0, 1) and dip is not None:  # (first, as segment.c's dip_step)
+                found, g0 = dip(t_prev, x.t, g0, x.y, dky)
+                if found is not None:
+                    info = np.zeros((1, g0.size))
+                    info[0, found[1]] = -1
+                    x = SimpleNamespace(t=found[0], y=dky(found[0]), status=2, message="",
+                                        i_events=info, nfev=x.nfev, njev=x.njev)
+                    dipped = True
             if x.status == 0 and (after_step(x.t, n := trap.steps()) or trap(n, trapped)):
                 x = SimpleNamespace(t=x.t, y=x.y, status=2, message="", i_events=None,
                                     nfev=x.nfev, njev=x.njev)
-            if x.status >= 0:
+            if x.status >= 0 and not dipped:
                 track.add(x.t, x.y)
+            t_prev = x.t
             if not grid:
                 ts.append(x.t)
                 ys.append(x.y)

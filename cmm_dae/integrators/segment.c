@@ -95,6 +95,8 @@ void IDAFree(void **mem);
 #define SEG_CRAWLED 103 /* steps that no longer move t (see cmm_seg_crawl) */
 /* steps over which the trap is judged (at least 4/5 of them with a failure) */
 #define TRAP_WINDOW 500
+#define IDA_RTFUNC_FAIL (-10)
+#define DIP_ITERATIONS 60  /* dips.ITERATIONS */
 
 /* a CasADi-generated function and its work-size query */
 typedef int (*cafun)(const double **arg, double **res, long long *iw, double *w, int mem);
@@ -148,7 +150,11 @@ typedef struct {
     double crawl_step, h_natural, t_start, t_step;
     int in_place, in_place_max;
     long slow_steps;
-    int done, flag;
+    int done, flag, dipped;
+    /* gaps that dip beyond their stop and back inside one step (cmm_seg_dips): per root
+     * function the depth that counts (NaN: not a gap), its values at the last step's end */
+    const double *dip;
+    double *g0, *g1, *gm;
 } Seg;
 
 static int fn_init(Fn *fn, cafun f, cawork work) {
@@ -279,6 +285,7 @@ void cmm_seg_free(Seg *s) {
     if (s->id) N_VDestroy(s->id);
     if (s->tmp) N_VDestroy(s->tmp);
     free(s->wv); free(s->wt); free(s->wy); free(s->d0); free(s->d1);
+    free(s->g0); free(s->g1); free(s->gm);
     if (s->ctx) SUNContext_Free(&s->ctx);
     fn_free(&s->res); fn_free(&s->jac); fn_free(&s->ev); fn_free(&s->evx);
     free(s->dir);
@@ -449,6 +456,60 @@ void cmm_seg_first(Seg *s, double tout) {
     s->first_tout = tout;
 }
 
+/* Look for gaps that dip beyond their stop and back inside one step (dips.py says why):
+ * dip[i] the depth that counts for root function i (negative), NaN where it is not a
+ * gap; owned by the caller. Returns -1 where the root functions fail at the start. */
+int cmm_seg_dips(Seg *s, const double *dip) {
+    s->g0 = calloc((size_t)s->ne, sizeof(double));
+    s->g1 = calloc((size_t)s->ne, sizeof(double));
+    s->gm = calloc((size_t)s->ne, sizeof(double));
+    if (!s->g0 || !s->g1 || !s->gm) return -1;
+    s->dip = dip;
+    return rootfn(s->tprev, s->yy, s->yp, s->g0, s);
+}
+
+/* The root functions on IDA's interpolant at t (into s->gm) */
+static int g_at(Seg *s, double t) {
+    if (IDAGetDky(s->mem, t, 0, s->tmp) != 0) return -1;
+    return rootfn(t, s->tmp, s->yp, s->gm, s);
+}
+
+/* After a step from t0 to t1 (IDA's y at t1 in yy): the first gap that dipped beyond its
+ * stop inside it, as dips.locate finds it (the same bisections, in the same order): 1 with
+ * its instant in *troot and its index in *which, else 0 (-1: a root function failed). */
+static int dip_step(Seg *s, double t0, double t1, double *troot, int *which) {
+    int i, it, found = 0;
+    if (rootfn(t1, s->yy, s->yp, s->g1, s)) return -1;
+    for (i = 0; i < s->ne; i++) {
+        double a = t0, b = t1, lo, hi, m;
+        if (isnan(s->dip[i]) || !(s->g0[i] > 0.0 && s->g0[i] != 1.0 && s->g1[i] == 1.0))
+            continue;
+        for (it = 0; it < DIP_ITERATIONS; it++) {
+            m = 0.5 * (a + b);
+            if (!(a < m && m < b)) break;
+            if (g_at(s, m)) return -1;
+            if (s->gm[i] == 1.0) b = m; else a = m;
+        }
+        if (g_at(s, a)) return -1;
+        if (!(s->gm[i] < s->dip[i])) continue;
+        lo = t0;
+        hi = a;
+        for (it = 0; it < DIP_ITERATIONS; it++) {
+            m = 0.5 * (lo + hi);
+            if (!(lo < m && m < hi)) break;
+            if (g_at(s, m)) return -1;
+            if (s->gm[i] > 0.0) lo = m; else hi = m;
+        }
+        if (!found || hi < *troot) {
+            *troot = hi;
+            *which = i;
+            found = 1;
+        }
+    }
+    memcpy(s->g0, s->g1, sizeof(double) * (size_t)s->ne);
+    return found;
+}
+
 /* The watched unknowns' derivatives at t (within IDA's last step) into d */
 static int watch_rates(Seg *s, double t, double *d) {
     const double *x;
@@ -549,11 +610,27 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
         flag = IDASolve(s->mem, s->started || !(s->first_tout > 0.0) ? s->tend : s->first_tout,
                         &tt, s->yy, s->yp, IDA_ONE_STEP);
         s->started = 1;
-        if (flag >= 0 && s->nwatch) {
-            watch_step(s, s->tprev, tt, unperm(s, s->yy, s->ybuf));
-            s->tprev = tt;
+        if ((flag == 0 || flag == IDA_TSTOP_RETURN) && s->dip) {
+            double troot = tt;
+            int which = 0, got = dip_step(s, s->tprev, tt, &troot, &which);
+            if (got < 0) {
+                flag = IDA_RTFUNC_FAIL;
+            } else if (got) {  /* the segment ends there, as at a root of IDA's own */
+                if (IDAGetDky(s->mem, troot, 0, s->yy) != 0) {
+                    flag = IDA_RTFUNC_FAIL;
+                } else {
+                    memset(info, 0, sizeof(int) * (size_t)s->ne);
+                    info[which] = -1;
+                    tt = troot;
+                    flag = IDA_ROOT_RETURN;
+                    s->dipped = 1;
+                }
+            }
         }
-        if (flag == IDA_ROOT_RETURN) IDAGetRootInfo(s->mem, info);
+        if (flag >= 0 && s->nwatch && !s->dipped)
+            watch_step(s, s->tprev, tt, unperm(s, s->yy, s->ybuf));
+        if (flag >= 0) s->tprev = tt;
+        if (flag == IDA_ROOT_RETURN && !s->dipped) IDAGetRootInfo(s->mem, info);
         IDAGetNumSteps(s->mem, &nst);
         if (flag == 0 && s->in_place_max > 0) {
             if (tt - s->t_step > s->crawl_step) s->in_place = 0;
