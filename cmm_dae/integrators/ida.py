@@ -377,9 +377,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
                 with quiet_sundials():
                     start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
                     search = bool(np.any(~np.isnan(self.dips)))
-                    g0 = np.empty(self.dips.size)
-                    if search:
-                        self._events(float(tspan[0]), y0, yp0, g0)
+                    g0 = self._lean(y0) if search else None
                     r = _own_steps(solver, tspan, y0, yp0, self._interrupt,
                                    self.opts.output_dt is not None, self.watch,
                                    self.u.lam.start, self._trap, self._after_step,

@@ -87,13 +87,18 @@ class IdaCallbacks:
         """After a step of the Python path from t0 to t1 (event values ``g0`` at t0, y1 at
         t1, ``dky`` its interpolant): the first gap that dipped beyond its stop inside it
         (:func:`.dips.locate`, as ``segment.c`` after each step), and the values at t1."""
-        def g_at(t: float, y: np.ndarray | None = None) -> np.ndarray:
-            out = np.empty(1 + len(self.triggers))
-            self._events(t, dky(t) if y is None else y, None, out)
-            return out
+        def g_at(t: float) -> np.ndarray:
+            return self._lean(dky(t))
 
-        g1 = g_at(t1, y1)
+        g1 = self._lean(y1)
         return dips.locate(t0, t1, g0, g1, self.dips, g_at), g1
+
+    def _lean(self, y: np.ndarray) -> np.ndarray:
+        """The configuration's lean event functions at y (a gap's value is the same in the
+        exact ones: the dip search reads them alone, as ``segment.c`` does)."""
+        self.y_in[:] = y
+        self.ev_fn.run()
+        return self.ev_out.copy()
 
     def _events(self, t, y, yp, out):
         out[0] = 1.0  # (below zero only to end the segment: a Ctrl-C, an exception)

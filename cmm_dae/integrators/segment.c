@@ -239,15 +239,21 @@ static int jacfn(sunrealtype t, sunrealtype cj, N_Vector y, N_Vector yp, N_Vecto
     return 0;
 }
 
-static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *ud) {
-    Seg *s = ud;
-    const double *yy = unperm(s, y, s->ybuf);
-    (void)yp;
+/* The lean event functions of y (the mechanism's order) into g (a gap's value is the same
+ * in the exact ones: a dip search reads them alone) */
+static int lean(Seg *s, const double *yy, double *g) {
     s->ev.arg[0] = yy;
     s->ev.arg[1] = s->p;  /* (its constants: p's tail) */
     s->ev.res[0] = g;
     s->ev.res[1] = &s->near;
-    if (s->ev.f(s->ev.arg, s->ev.res, s->ev.iw, s->ev.w, 0)) return -1;
+    return s->ev.f(s->ev.arg, s->ev.res, s->ev.iw, s->ev.w, 0) ? -1 : 0;
+}
+
+static int rootfn(sunrealtype t, N_Vector y, N_Vector yp, sunrealtype *g, void *ud) {
+    Seg *s = ud;
+    const double *yy = unperm(s, y, s->ybuf);
+    (void)yp;
+    if (lean(s, yy, g)) return -1;
     /* a lock force near its threshold (or multipliers out of the error test): exact */
     if (s->has_evx && (s->relaxed || s->near < 0.0)) {
         s->tbuf = t;
@@ -465,13 +471,13 @@ int cmm_seg_dips(Seg *s, const double *dip) {
     s->gm = calloc((size_t)s->ne, sizeof(double));
     if (!s->g0 || !s->g1 || !s->gm) return -1;
     s->dip = dip;
-    return rootfn(s->tprev, s->yy, s->yp, s->g0, s);
+    return lean(s, unperm(s, s->yy, s->ybuf), s->g0);
 }
 
-/* The root functions on IDA's interpolant at t (into s->gm) */
+/* The lean event functions on IDA's interpolant at t (into s->gm) */
 static int g_at(Seg *s, double t) {
     if (IDAGetDky(s->mem, t, 0, s->tmp) != 0) return -1;
-    return rootfn(t, s->tmp, s->yp, s->gm, s);
+    return lean(s, unperm(s, s->tmp, s->ybuf), s->gm);
 }
 
 /* After a step from t0 to t1 (IDA's y at t1 in yy): the first gap that dipped beyond its
@@ -479,7 +485,7 @@ static int g_at(Seg *s, double t) {
  * its instant in *troot and its index in *which, else 0 (-1: a root function failed). */
 static int dip_step(Seg *s, double t0, double t1, double *troot, int *which) {
     int i, it, found = 0;
-    if (rootfn(t1, s->yy, s->yp, s->g1, s)) return -1;
+    if (lean(s, unperm(s, s->yy, s->ybuf), s->g1)) return -1;
     for (i = 0; i < s->ne; i++) {
         double a = t0, b = t1, lo, hi, m;
         if (isnan(s->dip[i]) || !(s->g0[i] > 0.0 && s->g0[i] != 1.0 && s->g1[i] == 1.0))
