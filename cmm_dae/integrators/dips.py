@@ -24,10 +24,13 @@ import numpy as np
 
 from ..hybrid import policy as ev
 
-__all__ = ["ITERATIONS", "depths", "locate"]
+__all__ = ["ITERATIONS", "SAME", "depths", "locate"]
 
 #: Bisection steps of each search (a step's length to below its round-off).
 ITERATIONS = 60
+#: Crossings this many round-offs of the step apart are one instant (IDA's own root
+#: tolerance, 100 uround (|t| + |h|)).
+SAME = 100.0
 
 
 def depths(hs: ev.HybridState, triggers: list[ev.Trigger]) -> np.ndarray:
@@ -42,11 +45,13 @@ def depths(hs: ev.HybridState, triggers: list[ev.Trigger]) -> np.ndarray:
 
 
 def locate(t0: float, t1: float, g0: np.ndarray, g1: np.ndarray, depth: np.ndarray,
-           g_at: Callable[[float], np.ndarray]) -> tuple[float, int] | None:
-    """The first gap that dipped beyond its stop inside the step from ``t0`` to ``t1``
-    (event values ``g0``, ``g1`` at its ends, ``g_at(t)`` on its interpolant): (the
-    instant it crossed, s, its index among the event functions), or None."""
-    best: tuple[float, int] | None = None
+           g_at: Callable[[float], np.ndarray]) -> tuple[float, list[int]] | None:
+    """The first gaps that dipped beyond their stops inside the step from ``t0`` to
+    ``t1`` (event values ``g0``, ``g1`` at its ends, ``g_at(t)`` on its interpolant):
+    (the instant the first crossed, s, the indices among the event functions of those
+    that crossed then, within IDA's own root tolerance: two stops a symmetric mechanism
+    reaches at one instant), or None."""
+    found: list[tuple[float, int]] = []
     for i in np.flatnonzero(~np.isnan(depth)):
         if not (g0[i] > 0.0 and g0[i] != 1.0 and g1[i] == 1.0):
             continue
@@ -70,6 +75,9 @@ def locate(t0: float, t1: float, g0: np.ndarray, g1: np.ndarray, depth: np.ndarr
                 lo = m
             else:
                 hi = m
-        if best is None or hi < best[0]:
-            best = (hi, int(i))
-    return best
+        found.append((hi, int(i)))
+    if not found:
+        return None
+    first = min(t for t, _ in found)
+    tol = SAME * np.finfo(float).eps * (abs(t1) + (t1 - t0))
+    return first, [i for t, i in found if t <= first + tol]

@@ -83,7 +83,7 @@ class IdaCallbacks:
         return self.crawled or self.stalled
 
     def _dip(self, t0: float, t1: float, g0: np.ndarray, y1: np.ndarray, dky
-             ) -> tuple[tuple[float, int] | None, np.ndarray]:
+             ) -> tuple[tuple[float, list[int]] | None, np.ndarray]:
         """After a step of the Python path from t0 to t1 (event values ``g0`` at t0, y1 at
         t1, ``dky`` its interpolant): the first gap that dipped beyond its stop inside it
         (:func:`.dips.locate`, as ``segment.c`` after each step), and the values at t1."""

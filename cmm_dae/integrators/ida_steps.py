@@ -231,7 +231,7 @@ def _own_steps(solver, tspan: np.ndarray, y0: np.ndarray, yp0: np.ndarray,
                 found, g0 = dip(t_prev, x.t, g0, x.y, dky)
                 if found is not None:
                     info = np.zeros((1, g0.size))
-                    info[0, found[1]] = -1
+                    info[0, found[1]] = -1  # (every gap that crossed at that instant)
                     x = SimpleNamespace(t=found[0], y=dky(found[0]), status=2, message="",
                                         i_events=info, nfev=x.nfev, njev=x.njev)
                     dipped = True

@@ -13,6 +13,7 @@
  * The wheel ships no SUNDIALS headers: the few prototypes used are declared here, for
  * SUNDIALS 7 built with double precision, 32-bit indices and no MPI (as scikit-sundae's).
  */
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -97,6 +98,7 @@ void IDAFree(void **mem);
 #define TRAP_WINDOW 500
 #define IDA_RTFUNC_FAIL (-10)
 #define DIP_ITERATIONS 60  /* dips.ITERATIONS */
+#define DIP_SAME 100.0     /* dips.SAME */
 
 /* a CasADi-generated function and its work-size query */
 typedef int (*cafun)(const double **arg, double **res, long long *iw, double *w, int mem);
@@ -154,7 +156,7 @@ typedef struct {
     /* gaps that dip beyond their stop and back inside one step (cmm_seg_dips): per root
      * function the depth that counts (NaN: not a gap), its values at the last step's end */
     const double *dip;
-    double *g0, *g1, *gm;
+    double *g0, *g1, *gm, *th;
 } Seg;
 
 static int fn_init(Fn *fn, cafun f, cawork work) {
@@ -291,7 +293,7 @@ void cmm_seg_free(Seg *s) {
     if (s->id) N_VDestroy(s->id);
     if (s->tmp) N_VDestroy(s->tmp);
     free(s->wv); free(s->wt); free(s->wy); free(s->d0); free(s->d1);
-    free(s->g0); free(s->g1); free(s->gm);
+    free(s->g0); free(s->g1); free(s->gm); free(s->th);
     if (s->ctx) SUNContext_Free(&s->ctx);
     fn_free(&s->res); fn_free(&s->jac); fn_free(&s->ev); fn_free(&s->evx);
     free(s->dir);
@@ -469,7 +471,8 @@ int cmm_seg_dips(Seg *s, const double *dip) {
     s->g0 = calloc((size_t)s->ne, sizeof(double));
     s->g1 = calloc((size_t)s->ne, sizeof(double));
     s->gm = calloc((size_t)s->ne, sizeof(double));
-    if (!s->g0 || !s->g1 || !s->gm) return -1;
+    s->th = calloc((size_t)s->ne, sizeof(double));
+    if (!s->g0 || !s->g1 || !s->gm || !s->th) return -1;
     s->dip = dip;
     return lean(s, unperm(s, s->yy, s->ybuf), s->g0);
 }
@@ -480,11 +483,14 @@ static int g_at(Seg *s, double t) {
     return lean(s, unperm(s, s->tmp, s->ybuf), s->gm);
 }
 
-/* After a step from t0 to t1 (IDA's y at t1 in yy): the first gap that dipped beyond its
- * stop inside it, as dips.locate finds it (the same bisections, in the same order): 1 with
- * its instant in *troot and its index in *which, else 0 (-1: a root function failed). */
-static int dip_step(Seg *s, double t0, double t1, double *troot, int *which) {
+/* After a step from t0 to t1 (IDA's y at t1 in yy): the first gaps that dipped beyond
+ * their stops inside it, as dips.locate finds them (the same bisections, in the same
+ * order): 1 with the instant in *troot and info[i] = -1 for each gap that crossed then
+ * (within IDA's root tolerance), else 0 (-1: a root function failed). */
+static int dip_step(Seg *s, double t0, double t1, double *troot, int *info) {
     int i, it, found = 0;
+    double tol = DIP_SAME * DBL_EPSILON * (fabs(t1) + (t1 - t0));
+    for (i = 0; i < s->ne; i++) s->th[i] = NAN;
     if (lean(s, unperm(s, s->yy, s->ybuf), s->g1)) return -1;
     for (i = 0; i < s->ne; i++) {
         double a = t0, b = t1, lo, hi, m;
@@ -506,13 +512,16 @@ static int dip_step(Seg *s, double t0, double t1, double *troot, int *which) {
             if (g_at(s, m)) return -1;
             if (s->gm[i] > 0.0) lo = m; else hi = m;
         }
-        if (!found || hi < *troot) {
-            *troot = hi;
-            *which = i;
-            found = 1;
-        }
+        s->th[i] = hi;
+        if (!found || hi < *troot) *troot = hi;
+        found = 1;
     }
     memcpy(s->g0, s->g1, sizeof(double) * (size_t)s->ne);
+    if (found) {
+        memset(info, 0, sizeof(int) * (size_t)s->ne);
+        for (i = 0; i < s->ne; i++)
+            if (!isnan(s->th[i]) && s->th[i] <= *troot + tol) info[i] = -1;
+    }
     return found;
 }
 
@@ -618,15 +627,13 @@ int cmm_seg_run(Seg *s, double *T, double *Y, int cap, int *n, int *info, long *
         s->started = 1;
         if ((flag == 0 || flag == IDA_TSTOP_RETURN) && s->dip) {
             double troot = tt;
-            int which = 0, got = dip_step(s, s->tprev, tt, &troot, &which);
+            int got = dip_step(s, s->tprev, tt, &troot, info);
             if (got < 0) {
                 flag = IDA_RTFUNC_FAIL;
             } else if (got) {  /* the segment ends there, as at a root of IDA's own */
                 if (IDAGetDky(s->mem, troot, 0, s->yy) != 0) {
                     flag = IDA_RTFUNC_FAIL;
                 } else {
-                    memset(info, 0, sizeof(int) * (size_t)s->ne);
-                    info[which] = -1;
                     tt = troot;
                     flag = IDA_ROOT_RETURN;
                     s->dipped = 1;
