@@ -123,6 +123,8 @@ def _viewing(sub) -> None:
     e = sub.add_parser("events", help="event table of a model run or of a saved result")
     e.add_argument("source", help="model file or example name, or a saved result (.npz)")
     e.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    e.add_argument("--rtol", type=float, default=None,
+                   help="IDA relative tolerance for a model (1e-8, as run's)")
     e.set_defaults(func=_events)
 
     s = sub.add_parser("structure", help="mobility, active parts and Assur groups")

@@ -144,8 +144,9 @@ def _compare(args: argparse.Namespace) -> int:
     return 0 if all(r.success for r in res) else 3
 
 
-def _result_of(source: str, t_end: float):
-    """A saved Result (.npz) or a run of a model file (.toml); anything else is refused."""
+def _result_of(source: str, t_end: float, rtol: float | None = None):
+    """A saved Result (.npz) or a run of a model file (.toml) to ``t_end`` (at ``rtol``,
+    or the default); anything else is refused."""
     from . import load_result, simulate
     from .description.library import model_path
 
@@ -153,7 +154,7 @@ def _result_of(source: str, t_end: float):
     if path.suffix == ".npz" or _is_zip(path):  # (Result.save writes any name it is given)
         return load_result(path)
     if path.suffix == ".toml":
-        return simulate(_load(str(path)), t_end)
+        return simulate(_load(str(path)), t_end, **({} if rtol is None else {"rtol": rtol}))
     raise CmmError(f"'{source}': expected a model file (.toml) or a saved result (.npz), "
                    f"not a '{path.suffix or 'suffix-less'}' file")
 
@@ -167,7 +168,7 @@ def _is_zip(path: Path) -> bool:
 
 
 def _events(args: argparse.Namespace) -> int:
-    print(_result_of(args.source, args.t_end).event_table())
+    print(_result_of(args.source, args.t_end, args.rtol).event_table())
     return 0
 
 

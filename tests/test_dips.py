@@ -116,3 +116,38 @@ velocities = {{ X1 = 0.0, X2 = 0.0 }}
         assert abs(r.events[0].t - T_HIT) <= 1e-5
         for j in ("X1", "X2"):
             assert min(r.joint(j).position) >= -A + D - 1e-9
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("speed", [4.47e-7, 9e-7])
+def test_a_joint_drifting_into_its_stop_slower_than_v_lock_locks(tmp_path, speed):
+    """A block drifting into its stop slower than ``v_lock`` (1e-6 m/s) with nothing along
+    its joint (the stop's force 0): it locks at the contact (found by a new user: it was
+    taken for a joint leaving its stop and passed 5e-7 m through it, no event)."""
+    path = tmp_path / "drift.toml"
+    path.write_text(f"""
+[mechanism]
+name = "drifting block"
+gravity = [0.0, -9.81]
+[ground.points]
+O = [0.0, 0.0]
+[bodies.block]
+mass = 1.0
+inertia = 1.0e-3
+points = {{ P = [0.0, 0.0] }}
+[joints.X]
+type = "prismatic"
+connects = ["ground.O", "block.P"]
+axis = [1.0, 0.0]
+limits = {{ lower = -1e-06 }}
+restitution = 0.5
+[initial]
+joints = {{ X = 0.0 }}
+velocities = {{ X = {-speed!r} }}
+""")
+    mech = cd.load(path)
+    for c in (True, False):
+        r = cd.run_dae(mech, 1.5e-6 / speed, rtol=1e-10, compiled=c)
+        assert [e.kind for e in r.events] == ["lock"]
+        assert abs(r.events[0].t - 1e-6 / speed) <= 1e-6
+        assert min(r.joint("X").position) >= -1e-6 - 1e-12

@@ -313,3 +313,16 @@ def test_a_sample_whose_reaction_friction_fails_keeps_the_run(monkeypatch):
     bad = np.isnan(res.data["a"]).any(axis=1)
     assert res.success and bad.sum() == 1 and res.t[bad][0] > 1.0
     assert np.array_equal(res.data["q"], res_ok.data["q"])
+
+
+@pytest.mark.timeout(120)
+def test_events_of_a_model_take_the_runs_rtol(tmp_path):
+    """``events MODEL --rtol`` lists the run at that tolerance (found by a new user: it
+    always ran at the default, so its times differed from the ``run --rtol`` just made)."""
+    model = str(ROOT / "models" / "pendulum_stop.toml")
+    r = cli("events", model, "--t-end", "1", "--rtol", "1e-10", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    t = cd.run_dae(cd.load(model), 1.0, rtol=1e-10).events[0].t
+    assert f"{t:.9f}" in r.stdout
+    r = cli("events", model, "--rtol", "-1", cwd=tmp_path)
+    assert r.returncode != 0 and "rtol" in r.stderr

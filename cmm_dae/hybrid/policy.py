@@ -212,8 +212,8 @@ def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float
     """Is a detected trigger a real switch? Re-entry guards shared by both integrators.
 
     A gap is rejected when the joint already moves away from the stop (a round-off root),
-    or when it arrives at (almost) zero speed and the stop would not push (the joint is
-    leaving); a push is rejected when the joint is no longer locked, a gap when it is
+    or when it arrives at (almost) zero speed and the stop would have to pull (the joint
+    is leaving); a push is rejected when the joint is no longer locked, a gap when it is
     locked already (an earlier event of the same instant changed it)."""
     if tr.kind in (TK.PUSH, TK.SLIP):
         return hs.locked.get(tr.joint) == tr.side
@@ -224,10 +224,11 @@ def confirm(hs: HybridState, tr: Trigger, q: np.ndarray, v: np.ndarray, t: float
     cdv = joint_rate(hs.model, q, v, tr.joint)
     if (cdv >= 0.0 and tr.side == "lower") or (cdv <= 0.0 and tr.side == "upper"):
         return False
-    if abs(cdv) <= policy.v_lock:
+    if abs(cdv) <= policy.v_lock:  # leaving only where the stop would have to pull (a
+        # joint drifting in with nothing along it, force 0, passed through its stop)
         trial = {**hs.locked, tr.joint: tr.side}
         q_on = project_positions(hs.model, q, t, hs.params_of(trial))
-        return hs.lock_force(q_on, v, t, tr.joint, trial) > 0.0
+        return hs.lock_force(q_on, v, t, tr.joint, trial) >= 0.0
     return True
 
 
