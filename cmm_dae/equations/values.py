@@ -12,13 +12,12 @@ Which numbers: those the model builder reads from the symbolic mechanism alone (
 planar and principal inertias, points, springs, dampers, kinetic friction, contact radii,
 prismatic angles, drivers' law values, force elements, gravity). Not: the numbers the
 event policy reads (stops, restitution, static friction, zones), load laws, gear ratios
-(the tooth force's direction follows their sign and size),
-full inertia tensors (their principal axes are an eigen-decomposition), the two points of
-a revolute joint that pins an undriven body to the ground (IDA carries that body by its
-angle), a spatial spring's rest (the
-hinge angle's centre), and a value that is exactly zero (it keeps terms out of the
-equations, and so their sparsity). Those are part of the structure (:func:`structure_key`):
-another value there is another model.
+(the tooth force's direction follows their sign and size), full inertia tensors (their
+principal axes are an eigen-decomposition), the two points of a revolute joint that pins
+an undriven body to the ground (IDA carries that body by its angle), a spatial spring's
+rest (the hinge angle's centre), and a value that is exactly zero (it keeps terms out of
+the equations, and so their sparsity). Those are part of the structure
+(:func:`structure_key`): another value there is another model.
 """
 
 from __future__ import annotations
@@ -37,7 +36,7 @@ from ..description.params import param_value, path_problem, symbolic
 from . import build, kkt
 from .unknowns import ground_pins
 
-__all__ = ["parameters", "structure_key", "value_paths", "variant"]
+__all__ = ["parameters", "structure_key", "structure_of", "value_paths", "variant"]
 
 #: The fields of each table whose values are inputs (see the module's docstring).
 _JOINT = ("spring.stiffness", "spring.rest", "damper.damping", "angle", "friction.kinetic",
@@ -112,7 +111,8 @@ def parameters(model: Any, mech: Mechanism, theta: Sequence[str]) -> ca.SX:
     whose parameters are the symbols ``theta``). Sets the model's ``theta_paths``,
     ``theta``, ``theta0``, ``value_paths``, ``w0``, the layout of p (``n_switches``,
     ``w_at``, ``n_params``), ``smech`` (the mechanism with those symbols) and
-    ``shared``, and its bookkeeping (:func:`~.build.names`)."""
+    ``shared``, and its bookkeeping (:func:`~.build.names`). Its ``structure`` (the
+    :func:`structure_key`) is found where first asked (:func:`structure_of`)."""
     #: model parameters (dotted paths, checked by the caller) kept as the symbols
     #: ``theta`` in ``Model.sym`` (the equations for sensitivities); the compiled
     #: functions hold their values ``theta0``
@@ -120,9 +120,7 @@ def parameters(model: Any, mech: Mechanism, theta: Sequence[str]) -> ca.SX:
     model.theta = ca.SX.sym("theta", len(model.theta_paths))
     model.theta0 = np.array([param_value(mech, x) for x in model.theta_paths])
     model.value_paths = () if model.theta_paths else value_paths(mech)
-    #: the structure's key (:func:`structure_key`): what a variant must share
-    model.structure = structure_key(mech, model.value_paths)
-    model.w0 = np.array([param_value(mech, x) for x in model.value_paths], dtype=float)
+    model.w0 = _values(mech, model.value_paths)
     model.smech = mech
     build.names(model, mech)
     nl, nz = len(model.locks), len(model.zoned)
@@ -155,7 +153,7 @@ def variant(model: Any, mech: Mechanism, key: str | None = None) -> Any:
     ModelError for a mechanism of another structure."""
     if key is None and not model.theta_paths:
         key = structure_key(mech, value_paths(mech))
-    if model.theta_paths or key != model.structure:
+    if model.theta_paths or key != structure_of(model):
         raise ModelError(Problem(
             "model", "variant", f"mechanism {mech.name!r} has another structure than the "
             f"model's ({model.mech.name!r}): a number it keeps as structure differs (stops, "
@@ -166,7 +164,7 @@ def variant(model: Any, mech: Mechanism, key: str | None = None) -> Any:
             mech.source)
     new = copy.copy(model)
     new.mech = mech
-    new.w0 = np.array([param_value(mech, x) for x in model.value_paths], dtype=float)
+    new.w0 = _values(mech, model.value_paths)
     if not (np.array_equal(new.w0, model.w0) and mech.initial == model.mech.initial):
         for cache in ("_once", "_recent"):  # (else the same mechanism: its start too)
             new.__dict__.pop(cache, None)
@@ -174,3 +172,17 @@ def variant(model: Any, mech: Mechanism, key: str | None = None) -> Any:
     build.names(new, mech)  # the numeric records and masses (its smech is the shared one)
     new._kkt = kkt.Solver(new, model.phi_q_pattern)
     return new
+
+
+def structure_of(model: Any) -> str:
+    """A model's :func:`structure_key`, found once (a run's cache sets it where it has
+    found it already)."""
+    got = model.__dict__.get("structure")
+    if got is None:
+        got = model.structure = structure_key(model.mech, model.value_paths)
+    return got
+
+
+def _values(mech: Mechanism, paths: tuple[str, ...]) -> np.ndarray:
+    """The values of ``mech`` at ``paths`` (the tail of its models' ``p``)."""
+    return np.array([param_value(mech, x) for x in paths], dtype=float)

@@ -110,6 +110,7 @@ def shared_model(mech: Mechanism, key: str, drop: tuple[int, ...],
         _structures.move_to_end((key, drop))
         return base if base.mech is mech else variant(base, mech, key)
     model = build()
+    model.structure = key  # (found already: values.structure_of need not again)
     _structures[(key, drop)] = model
     while len(_structures) > STRUCTURES_KEPT:
         _structures.popitem(last=False)
