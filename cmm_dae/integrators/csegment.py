@@ -255,8 +255,8 @@ class CompiledModel:
         (crawl step s, steps in place, slow steps, natural step s) of the crawl test;
         ``first_tout``: the tout of IDA's first call, s (its first step is a thousandth of
         the way there; 0: the segment's end); ``dips``: per event function the depth a
-        gap that dipped beyond its stop inside a step must reach (:mod:`.dips`; NaN:
-        not a gap; None: no search)."""
+        gap that dipped beyond its stop inside a step must reach (:func:`.dips.depths`;
+        NaN: not a gap; None: no gap, no search)."""
         model, lib, order = self.model, self.lib, self.band if band else None
         N, ne = model.ida.N, 1 + n_triggers
         (ev_f, ev_w), (evx_f, evx_w) = events.ev, events.evx
@@ -280,8 +280,7 @@ class CompiledModel:
             raise MemoryError("SUNDIALS could not set up the compiled segment")
         lib.cmm_seg_first(seg, D(first_tout))
         dips_ = None if dips is None else np.ascontiguousarray(dips, dtype=float)
-        if dips_ is not None and np.any(~np.isnan(dips_)) \
-                and lib.cmm_seg_dips(seg, dips_.ctypes.data_as(_D)) != 0:
+        if dips_ is not None and lib.cmm_seg_dips(seg, dips_.ctypes.data_as(_D)) != 0:
             lib.cmm_seg_free(seg)
             raise RuntimeError("the event functions failed at the segment's start")
         if crawl is not None:

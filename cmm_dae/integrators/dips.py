@@ -33,15 +33,16 @@ ITERATIONS = 60
 SAME = 100.0
 
 
-def depths(hs: ev.HybridState, triggers: list[ev.Trigger]) -> np.ndarray:
+def depths(hs: ev.HybridState, triggers: list[ev.Trigger]) -> np.ndarray | None:
     """Per event function (the first, always positive, then ``triggers``): how far beyond
     its stop a gap must have dipped inside a step to count (a negative distance, minus
-    :meth:`~cmm_dae.hybrid.state.HybridState.stop_band`); NaN for the others."""
+    :meth:`~cmm_dae.hybrid.state.HybridState.stop_band`); NaN for the others. None where
+    no trigger is a gap (nothing to search)."""
     out = np.full(1 + len(triggers), np.nan)
     for i, tr in enumerate(triggers):
         if tr.kind == ev.TK.GAP:
             out[1 + i] = -float(hs.stop_band(hs.limit_value(tr.joint, tr.side)))
-    return out
+    return out if np.any(~np.isnan(out)) else None
 
 
 def locate(t0: float, t1: float, g0: np.ndarray, g1: np.ndarray, depth: np.ndarray,

@@ -376,12 +376,12 @@ class IdaIntegrator(IdaCallbacks, Integrator):
             else:
                 with quiet_sundials():
                     start_suppressed(solver, float(tspan[0]), y0, yp0, self.suppress)
-                    search = bool(np.any(~np.isnan(self.dips)))
-                    g0 = self._lean(y0) if search else None
+                    search = self.dips is not None  # (a gap among the triggers)
                     r = _own_steps(solver, tspan, y0, yp0, self._interrupt,
                                    self.opts.output_dt is not None, self.watch,
                                    self.u.lam.start, self._trap, self._after_step,
-                                   self._dip if search else None, g0)
+                                   self._dip if search else None,
+                                   self._lean(y0) if search else None)
                 self.n_steps = r.steps  # (IDA's count with the last step, as in C)
         except CmmError:
             raise
