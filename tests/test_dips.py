@@ -20,29 +20,38 @@ W = 2.0 * math.pi
 T_HIT = math.acos(-(1.0 - D / A)) / W  # s
 
 
-def _block(tmp_path):
-    path = tmp_path / "graze.toml"
-    path.write_text(f"""
+def _blocks(tmp_path, joints=("X",), spring: bool = True, lower: float = -A + D,
+            x0: float = A, v0: float = 0.0, gravity: float = 0.0) -> cd.Mechanism:
+    """Blocks on horizontal rails, one per joint name (each its own rail and stop at
+    ``lower``), on a spring of W rad/s or free, starting at ``x0`` moving at ``v0``;
+    ``gravity`` across the rails."""
+    parts = [f"""
 [mechanism]
-name = "grazing block"
-gravity = [0.0, 0.0]
+name = "grazing blocks"
+gravity = [0.0, {gravity!r}]
 [ground.points]
-O = [0.0, 0.0]
-[bodies.block]
+{chr(10).join(f"O{j} = [0.0, {k!r}]" for k, j in enumerate(joints))}
+"""]
+    for j in joints:
+        parts.append(f"""
+[bodies.b{j}]
 mass = 1.0
 inertia = 0.01
 points = {{ P = [0.0, 0.0] }}
-[joints.X]
+[joints.{j}]
 type = "prismatic"
-connects = ["ground.O", "block.P"]
+connects = ["ground.O{j}", "b{j}.P"]
 axis = [1.0, 0.0]
-spring = {{ stiffness = {W * W!r}, rest = 0.0 }}
-limits = {{ lower = {-A + D!r} }}
+limits = {{ lower = {lower!r} }}
 restitution = 0.5
+""" + (f"spring = {{ stiffness = {W * W!r}, rest = 0.0 }}\n" if spring else ""))
+    parts.append(f"""
 [initial]
-joints = {{ X = {A!r} }}
-velocities = {{ X = 0.0 }}
+joints = {{ {", ".join(f"{j} = {x0!r}" for j in joints)} }}
+velocities = {{ {", ".join(f"{j} = {v0!r}" for j in joints)} }}
 """)
+    path = tmp_path / "blocks.toml"
+    path.write_text("".join(parts))
     return cd.load(path)
 
 
@@ -53,7 +62,7 @@ def test_a_grazing_impact_inside_one_step_is_found(tmp_path, rtol, tol):
     6.3e-7, 3.7e-8 s at rtol 1e-6, 1e-8, 1e-10: the time of a grazing impact carries the
     position's error over the impact speed, 4 mm/s), on both IDA paths alike, on IDA's own
     steps and on an output grid."""
-    mech = _block(tmp_path)
+    mech = _blocks(tmp_path)
     runs = [cd.run_dae(mech, 0.9, rtol=rtol, compiled=c, output_dt=dt)
             for c in (True, False) for dt in (None, 1e-3)]
     for r in runs:
@@ -70,7 +79,7 @@ def test_a_grazing_impact_inside_one_step_is_found(tmp_path, rtol, tol):
 def test_a_near_miss_is_not_an_impact(tmp_path):
     """The same swing stopping 2 um short of the stop (the stop moved 4 um down): no
     event; the dip search has nothing to find where the gap stays positive."""
-    mech = cd.with_params(_block(tmp_path), {"joints.X.limits.lower": -A - D})
+    mech = cd.with_params(_blocks(tmp_path), {"joints.X.limits.lower": -A - D})
     for c in (True, False):
         r = cd.run_dae(mech, 0.9, compiled=c)
         assert r.success and not r.events
@@ -82,33 +91,7 @@ def test_two_grazing_impacts_at_one_instant_are_both_found(tmp_path, rtol):
     """Two identical blocks in one mechanism graze their stops at the same instant: both
     bounce then (found by a new user: only the first was reported, and the second block
     went 9.9e-7 m beyond its stop, its impact a period later), on both paths."""
-    blocks = "".join(f"""
-[bodies.b{k}]
-mass = 1.0
-inertia = 0.01
-points = {{ P = [0.0, 0.0] }}
-[joints.X{k}]
-type = "prismatic"
-connects = ["ground.O{k}", "b{k}.P"]
-axis = [1.0, 0.0]
-spring = {{ stiffness = {W * W!r}, rest = 0.0 }}
-limits = {{ lower = {-A + D!r} }}
-restitution = 0.5
-""" for k in (1, 2))
-    path = tmp_path / "two.toml"
-    path.write_text(f"""
-[mechanism]
-name = "two grazing blocks"
-gravity = [0.0, 0.0]
-[ground.points]
-O1 = [0.0, 0.0]
-O2 = [0.0, 1.0]
-{blocks}
-[initial]
-joints = {{ X1 = {A!r}, X2 = {A!r} }}
-velocities = {{ X1 = 0.0, X2 = 0.0 }}
-""")
-    mech = cd.load(path)
+    mech = _blocks(tmp_path, ("X1", "X2"))
     runs = [cd.run_dae(mech, 0.9, rtol=rtol, compiled=c) for c in (True, False)]
     for r in runs:
         assert sorted(e.joint for e in r.events) == ["X1", "X2"]
@@ -124,28 +107,7 @@ def test_a_joint_drifting_into_its_stop_slower_than_v_lock_locks(tmp_path, speed
     """A block drifting into its stop slower than ``v_lock`` (1e-6 m/s) with nothing along
     its joint (the stop's force 0): it locks at the contact (found by a new user: it was
     taken for a joint leaving its stop and passed 5e-7 m through it, no event)."""
-    path = tmp_path / "drift.toml"
-    path.write_text(f"""
-[mechanism]
-name = "drifting block"
-gravity = [0.0, -9.81]
-[ground.points]
-O = [0.0, 0.0]
-[bodies.block]
-mass = 1.0
-inertia = 1.0e-3
-points = {{ P = [0.0, 0.0] }}
-[joints.X]
-type = "prismatic"
-connects = ["ground.O", "block.P"]
-axis = [1.0, 0.0]
-limits = {{ lower = -1e-06 }}
-restitution = 0.5
-[initial]
-joints = {{ X = 0.0 }}
-velocities = {{ X = {-speed!r} }}
-""")
-    mech = cd.load(path)
+    mech = _blocks(tmp_path, spring=False, lower=-1e-6, x0=0.0, v0=-speed, gravity=-9.81)
     for c in (True, False):
         r = cd.run_dae(mech, 1.5e-6 / speed, rtol=1e-10, compiled=c)
         assert [e.kind for e in r.events] == ["lock"]
