@@ -12,6 +12,7 @@ from cmm_dae.simulation.passage_start import (
     START_RATIO,
     dips,
     end_may_dip,
+    falling_to_zero,
     predicted_start,
     start_before,
 )
@@ -208,3 +209,54 @@ def test_a_level_determinant_asks_no_ratio_at_the_ends():
     d[0] = -np.inf  # a sample singular to round-off is always asked
     assert end_may_dip(d, t, 0, 1, 2, 0.01)
     assert not end_may_dip(d, t, 1, 0, 2, 0.01)  # (its neighbour: rising from it)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_a_passage_between_uneven_samples_is_a_candidate(seed):
+    """The smallest singular value falls linearly to zero at t_star and rises again
+    (k of them together); IDA's steps around it uneven (a step cut right after it): the
+    interval holding t_star always gives the sample nearer the instant as the one
+    candidate, though the samples' own drop can be as small as 0.5 (the DIP rule, which
+    assumed even steps, then missed it)."""
+    rng = np.random.default_rng(500 + seed)
+    k = int(rng.choice([1, 3, 10]))
+    h = 10.0 ** rng.uniform(-6, -2, 40)
+    t = np.cumsum(h)
+    a = int(rng.integers(2, 37))
+    t_star = t[a] + rng.uniform(0.05, 0.95) * (t[a + 1] - t[a])
+    found = falling_to_zero(t, _logdet(t, t_star, k))
+    nearer = a if t_star - t[a] < t[a + 1] - t_star else a + 1
+    assert found == [nearer]
+
+
+def test_a_level_or_gently_bent_determinant_gives_no_candidate():
+    rng = np.random.default_rng(7)
+    t = np.cumsum(10.0 ** rng.uniform(-9, -2, 300))  # steps over seven decades
+    assert falling_to_zero(t, -7.7 + 1e-12 * rng.standard_normal(t.size)) == []
+    # a ratio dipping to half its value and back (a swing that does not near a singular
+    # position): its lines never reach zero within a step
+    s = 1.0 - 0.5 * np.sin(np.pi * t / t[-1])
+    assert falling_to_zero(t, 2.0 * np.log(s)) == []
+    assert falling_to_zero(t[:2], np.zeros(2)) == []
+
+
+def test_a02_passage_with_a_step_cut_after_it_is_logged():
+    """A02 (one loop) sampled around its first singular position as IDA had (rtol 1e-8,
+    atol 1e-10, 10 s: its 8th passage went unlogged): 2 ms steps up to 1.2 ms before the
+    instant, the next sample 0.8 ms after it, then steps of 10 us. The ratio at the
+    sample after it is 0.67 of the one before; the screen finds the passage, at the
+    instant a tight run's crossing gives (within 1e-6 s)."""
+    import cmm_dae as cd
+    from cmm_dae.description import iftomm
+    from cmm_dae.simulation import passage
+
+    mech = iftomm.a02_four_bar(1)
+    model = cd.Model(mech)
+    tight = cd.run_dae(mech, 0.75, rtol=1e-10, model=model, output_dt=1e-5)
+    t_s = next(e.t for e in tight.events if e.kind == "singular")
+    want = np.concatenate([t_s - 1.2e-3 - 2e-3 * np.arange(6)[::-1],
+                           t_s + 0.8e-3 + 1e-5 * np.arange(6)])
+    idx = np.unique(np.searchsorted(tight.t, want))
+    t, q, v = tight.t[idx], tight.data["q"][idx], tight.data["v"][idx]
+    found = passage.passages(model, model.params(), t, q, v, start=False)
+    assert len(found) == 1 and abs(found[0].t - t_s) <= 1e-6

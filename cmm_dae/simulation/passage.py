@@ -28,6 +28,7 @@ from .passage_start import (
     SampleRatios,
     dips,
     end_may_dip,
+    falling_to_zero,
     predicted_start,
     start_before,
 )
@@ -216,7 +217,8 @@ def _candidates(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np
         keep(*solved)
     lo_d, hi_d = np.append(d[0], d[:-1]), np.append(d[1:], d[-1])
     dip = (d <= lo_d) & (d <= hi_d) & (d <= np.maximum(lo_d, hi_d) - DIP)
-    candidates = [int(i) for i in np.flatnonzero(dip[1:-1]) + 1]
+    candidates = sorted({int(i) for i in np.flatnonzero(dip[1:-1]) + 1}
+                        | set(falling_to_zero(t, d)))
     # an end: where the ratio falls towards it and, on the two samples beside it extended
     # linearly, reaches zero within an interval of it; the determinant asked first
     for end, a, b in ((0, 1, 2), (n - 1, n - 2, n - 3)):
