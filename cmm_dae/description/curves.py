@@ -26,7 +26,8 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+
+from ..core.scipy_late import cubic_spline
 
 __all__ = ["GAUSS_NODES", "Spline", "polar_knots", "spline"]
 
@@ -62,10 +63,10 @@ class Spline:
         self.closed = closed
         if closed:
             self.knots, rad = polar_knots(pts)
-            sp = CubicSpline(self.knots, rad, bc_type="periodic")
+            sp = cubic_spline(self.knots, rad, bc_type="periodic")
         else:
             self.knots = pts[:, 0].copy()
-            sp = CubicSpline(self.knots, pts[:, 1])
+            sp = cubic_spline(self.knots, pts[:, 1])
         self.coef = sp.c
         widths = np.diff(self.knots)
         self.arc = np.concatenate([[0.0], np.cumsum(

@@ -22,9 +22,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.special import ellipj, ellipk
 
+from ..core.scipy_late import ellipj, ellipk, solve_ivp
 from .mechanism import Body, Initial, Joint, Mechanism
 
 G = 9.81

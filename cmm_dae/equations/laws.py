@@ -9,9 +9,9 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..core.errors import ModelError, Problem
+from ..core.scipy_late import cubic_spline
 from ..description.mechanism import Driver, Law, Mechanism
 
 
@@ -44,7 +44,7 @@ def spline_expr(times, values, t: ca.SX) -> ca.SX:
     """Clamped cubic spline (zero end slopes) through a table as a CasADi expression: C2
     inside the table; held at the last value after it (C1 there, thanks to the zero end
     slope). Shared by driver and load tables."""
-    sp = CubicSpline(np.array(times), np.array(values), bc_type="clamped")
+    sp = cubic_spline(np.array(times), np.array(values), bc_type="clamped")
     f = None
     for i, t0 in enumerate(sp.x[:-1]):
         c = sp.c[:, i]

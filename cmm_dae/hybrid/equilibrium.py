@@ -20,9 +20,9 @@ acceleration (the earlier rule, which adds that coordinate's convective term) le
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import root
 
 from ..core.errors import AssemblyError, CmmError, ModelError, Problem
+from ..core.scipy_late import root
 from ..description.mechanism import Initial, Mechanism
 from ..description.params import param_value, with_params
 from ..equations import rank

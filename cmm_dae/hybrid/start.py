@@ -9,11 +9,11 @@ KKT system. A loop that cannot close, or a redundant or singular constraint set,
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..core.errors import AssemblyError, ModelError, Problem
 from ..core.memo import once, recent
 from ..core.records import Event, EventKind
+from ..core.scipy_late import least_squares
 from ..equations import rank
 from ..equations.kinematics import redundant_rows
 from ..equations.model import Model

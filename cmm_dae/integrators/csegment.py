@@ -16,16 +16,16 @@ when it cannot, callers warn once and keep the Python path.
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import subprocess
 import threading
 from dataclasses import dataclass
+from importlib import metadata, util
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
-import sksundae  # loads the SUNDIALS libraries into the process before the driver
-from sksundae._cy_ida import IDAMESSAGES
 
 from ..core.memo import once
 from ..core.progress import Bar
@@ -55,9 +55,21 @@ _driver: ctypes.CDLL | None = None
 _driver_error: str | None = None
 
 
+#: scikit-sundae's package directory, found without importing it (its import loads
+#: scipy.optimize; the driver finds the SUNDIALS libraries by its rpath)
+def _package_dir() -> Path:
+    spec = util.find_spec("sksundae")
+    if spec is None or spec.origin is None:  # a required dependency: fail at import
+        raise ImportError("cmm_dae needs scikit-sundae (pip install scikit-sundae)")
+    return Path(spec.origin).resolve().parent
+
+
+_SKSUNDAE = _package_dir()
+
+
 def sundials_library(name: str) -> Path:
     """scikit-sundae's own SUNDIALS library ``name`` ("ida", "core", ...)."""
-    where = Path(sksundae.__file__).resolve().parent.parent / "scikit_sundae.libs"
+    where = _SKSUNDAE.parent / "scikit_sundae.libs"
     libs = sorted(where.glob(f"libsundials_{name}-*.so*"))
     if not libs:
         raise OSError(f"scikit-sundae's SUNDIALS library '{name}' is not in {where}")
@@ -68,15 +80,35 @@ def _sundials_libraries() -> list[Path]:
     return [sundials_library(name) for name in _SUNDIALS]
 
 
+@functools.cache
+def load_sundials() -> None:
+    """Load scikit-sundae's SUNDIALS libraries into the process, with the OpenMP runtime
+    and the OpenBLAS they link, as importing scikit-sundae had done at ``import cmm_dae``:
+    a run limits the threads of the libraries loaded when it starts
+    (``simulation.runner``), and loaded later by the compiled driver they kept their
+    default teams. Where they are missing nothing is loaded: the compiled path says so
+    when it is asked for, and the Python path's import of scikit-sundae fails clearly."""
+    try:
+        for path in _sundials_libraries():
+            ctypes.CDLL(str(path))
+    except OSError:
+        pass
+
+
 #: The scikit-sundae releases (major.minor) whose SUNDIALS the driver's hand-written
 #: prototypes match: segment.c calls IDA through them, so another SUNDIALS could be called
 #: with the wrong arguments; pyproject.toml pins the same range.
 TESTED_SKSUNDAE = ("1.2",)
 
 
+def sksundae_version() -> str:
+    """The installed scikit-sundae's version (from its metadata: not imported)."""
+    return metadata.version("scikit-sundae")
+
+
 def check_version(version: str | None = None) -> None:
     """Raise OSError unless scikit-sundae's version is one the driver was written for."""
-    version = sksundae.__version__ if version is None else version
+    version = sksundae_version() if version is None else version
     if ".".join(version.split(".")[:2]) not in TESTED_SKSUNDAE:
         raise OSError(f"scikit-sundae {version}: the compiled segment was written for "
                       f"{', '.join(v + '.x' for v in TESTED_SKSUNDAE)} (its SUNDIALS "
@@ -130,7 +162,6 @@ class SegmentRun:
     t: np.ndarray
     y: np.ndarray  # the differential unknowns only (coordinates, rates, works)
     status: int
-    message: str
     i_events: np.ndarray | None
     nfev: int
     njev: int
@@ -143,6 +174,20 @@ class SegmentRun:
     crawled: bool = False
     #: the watched unknowns' extremes over IDA's steps (:class:`Extremes`), or None
     extremes: Extremes | None = None
+
+    @property
+    def message(self) -> str:
+        """IDA's own sentence for :attr:`status` (scikit-sundae's table)."""
+        return ida_message(self.status)
+
+
+def ida_message(flag: int) -> str:
+    """IDA's own sentence for a return flag, from scikit-sundae's table, imported where a
+    message is read (a run on this path that succeeds never imports scikit-sundae: its
+    import, with the scipy.optimize it pulls in, was 0.2 s of a fresh process's 0.6)."""
+    from sksundae._cy_ida import IDAMESSAGES
+
+    return IDAMESSAGES.get(int(flag), f"IDA flag {flag}")
 
 
 @dataclass(frozen=True)
@@ -322,6 +367,5 @@ class CompiledModel:
             flag = 2
         return SegmentRun(
             np.concatenate(T_blocks), np.concatenate(Y_blocks), int(flag),
-            IDAMESSAGES.get(int(flag), f"IDA flag {flag}"),
             info[None, :].copy() if flag == 2 else None, int(stats[1]), int(stats[2]),
             int(stats[0]), interrupted or stalled, stalled, trapped, crawled, ext)

@@ -17,7 +17,6 @@ import warnings
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-import sksundae as sun
 
 from ..core.errors import CmmError, SolverError, Status
 from ..core.memo import once
@@ -34,6 +33,7 @@ from .ida_steps import (
     CRAWL_STEP,
     _own_steps,
     failure,
+    ida_class,
     quiet_sundials,
     segment_start,
     segment_times,
@@ -48,6 +48,7 @@ from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
 #: solve. IDA's interpolated multipliers were within 2e-4 relative of the KKT values on the
 #: shipped models, so the margin leaves a factor of 500.
 PUSH_MARGIN = 0.1
+
 
 
 class IdaIntegrator(IdaCallbacks, Integrator):
@@ -356,7 +357,7 @@ class IdaIntegrator(IdaCallbacks, Integrator):
         with warnings.catch_warnings():  # "custom sparse Jacobian approximation will be
             # ignored in favor of the user-defined jacfn": as intended
             warnings.simplefilter("ignore", UserWarning)
-            solver = None if self.c is not None else sun.ida.IDA(
+            solver = None if self.c is not None else ida_class()(
                 resfn, jacfn=jacfn, eventsfn=eventsfn, num_events=ne,
                 # IDA's limit per call: what is left of the run's budget, which the root
                 # function counts across calls and ends cleanly ("stalled")

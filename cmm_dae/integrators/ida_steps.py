@@ -29,7 +29,7 @@ from .suppress import Interpolant, TrapCheck
 from .tolerances import lambda_scale
 
 __all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOFF_ATOL",
-           "SLOW_STEPS", "SPARSE_FILL", "SPARSE_FROM", "failure", "quiet_sundials",
+           "SLOW_STEPS", "SPARSE_FILL", "SPARSE_FROM", "failure", "ida_class", "quiet_sundials",
            "segment_start", "segment_times", "sparse_solver"]
 
 #: A failure where the constraints' singular-value ratio is below this and falling along
@@ -37,6 +37,15 @@ __all__ = ["CRAWL_STEP", "FALLING_RATIO", "IN_PLACE_STEPS", "OUTGROWN", "ROUNDOF
 #: finds no singular instant ahead): at rtol 1e-12 IDA gave up on A02 at ratios up to
 #: 0.052, 0.05 s before the instant.
 FALLING_RATIO = 0.1
+
+
+def ida_class() -> type:
+    """scikit-sundae's IDA, imported where a Python-path solver is made (the compiled
+    segment calls SUNDIALS itself: its runs never import scikit-sundae, nor the
+    scipy.optimize that pulls in: 0.2 s of a fresh process)."""
+    from sksundae.ida import IDA
+
+    return IDA
 
 
 def segment_start(model: Model, q: np.ndarray, v: np.ndarray, t0: float, p: np.ndarray,

@@ -32,8 +32,6 @@ import ctypes
 import functools
 
 import numpy as np
-import sksundae
-from sksundae import _cy_ida
 
 from .csegment import sundials_library
 
@@ -139,6 +137,9 @@ class Interpolant:
 
 def _memory(solver) -> int:
     """The address of IDA's memory inside scikit-sundae's solver (after ``init_step``)."""
+    import sksundae
+    from sksundae import _cy_ida
+
     cy = getattr(solver, "_IDA__IDA", None)
     if not isinstance(cy, _cy_ida.IDA) or _cy_ida.IDA.__basicsize__ != _SIZE:
         raise RuntimeError(f"scikit-sundae {sksundae.__version__}: its IDA object is not "

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.integrate import cumulative_simpson
+
+from ..core.scipy_late import cumulative_simpson
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,9 @@ integrator, for :class:`~.replay.SensitivityPass`)."""
 from __future__ import annotations
 
 import numpy as np
-import sksundae as sun
 
 from ..equations.model import Buffered
-from ..integrators.ida_steps import quiet_sundials
+from ..integrators.ida_steps import ida_class, quiet_sundials
 from ..integrators.tolerances import ATOL_MU, lambda_atol, natural_step
 
 __all__ = ["ATOL_OFF", "LOOSE", "ida_segment"]
@@ -88,7 +87,7 @@ def ida_segment(self, t0, q, v, sq, sv, p, dP, outs, relaxed, k=1.0):
         atol = np.concatenate([base] + [np.maximum(base / scale[i] * (1.0 if control
                                                                       else LOOSE), off)
                                         for i in range(P)])
-        solver = sun.ida.IDA(resfn, jacfn=jacfn, rtol=self.rtol, atol=atol,
+        solver = ida_class()(resfn, jacfn=jacfn, rtol=self.rtol, atol=atol,
                              algebraic_idx=alg, max_num_steps=10**7, first_step=h0)
         with quiet_sundials():
             r = solver.solve(tspan, Y0, Yp0)

@@ -30,6 +30,7 @@ from ..hybrid import policy as ev
 from ..hybrid.equilibrium import solve_equilibrium
 from ..hybrid.start import start_state
 from ..integrators.contract import Integrator, Recorder, RunOptions
+from ..integrators.csegment import load_sundials
 from ..integrators.ida import IdaIntegrator
 from ..integrators.iterative import IterativeIntegrator
 from ..results.post import build_result
@@ -52,7 +53,8 @@ def _one_blas_thread():
     started the default team, whose idle threads spin: IDA's segments of A02 with 8 loops
     took 71 ms on average against 10 ms with one thread (best of 20: 8.1 against 9.0)."""
     global _BLAS
-    if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once
+    if _BLAS is None:  # finding the loaded BLAS libraries costs ~0.4 ms: once, after
+        load_sundials()  # SUNDIALS' (its OpenMP and OpenBLAS) are loaded
         _BLAS = ThreadpoolController()
     return _BLAS.limit(limits=1)
 

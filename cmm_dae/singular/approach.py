@@ -10,9 +10,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from ..core.errors import SolverError, Status
+from ..core.scipy_late import minimize_scalar
 from ..equations.kinematics import dependent_rows, row_names, singular_ratio
 from ..equations.kkt import accelerations
 from ..equations.model import Model

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
-from scipy.optimize import brentq, minimize_scalar
 
+from ..core.scipy_late import brentq, minimize_scalar
 from ..equations.kinematics import active_constraints
 from ..equations.minnorm import SPARSE_ROWS, SparseRows
 from ..equations.model import Model

@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ..core.errors import CmmError, ModelError, Problem
 from ..core.figures import pyplot
+from ..core.scipy_late import minimize
 from ..description.mechanism import Mechanism
 from ..description.params import param_value, with_params
 from ..description.writer import write_model
