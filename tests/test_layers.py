@@ -91,14 +91,13 @@ def test_no_import_hidden_in_a_function():
 #: what a function may import itself: the optional extras (a user without them gets the
 #: rest of the package), matplotlib where a report picks its backend first
 LATE = {"pandas", "mujoco", "exudyn", "distributed", "matplotlib", "importlib"}
-#: ... and where, of the required libraries: scipy's optimizers, splines and quadrature
-#: in the one module that passes them on (core/scipy_late.py), scikit-sundae where a
-#: Python-path solver is made or its memory or messages are read (the compiled path never
-#: imports it). Their imports were half of ``import cmm_dae``; scipy itself and
-#: scikit-sundae's presence are still checked at import (scipy.linalg at the top of the
-#: modules that use it, ``find_spec`` in csegment.py).
-LATE_IN = {"core/scipy_late.py": {"scipy"},
-           "integrators/ida_steps.py": {"sksundae"},
+#: ... and where, of the required libraries: scikit-sundae where a Python-path solver is
+#: made or its memory or messages are read (the compiled path never imports it; scipy's
+#: optimizers, splines and quadrature pass through core/scipy_late.py, by importlib).
+#: Those imports were half of ``import cmm_dae``; scipy itself and scikit-sundae's
+#: presence are still checked at import (scipy.linalg at the top of the modules that
+#: use it, ``find_spec`` in csegment.py).
+LATE_IN = {"integrators/ida_steps.py": {"sksundae"},
            "integrators/csegment.py": {"sksundae"},
            "integrators/suppress.py": {"sksundae"}}
 

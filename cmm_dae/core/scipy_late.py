@@ -11,77 +11,32 @@ use scipy.linalg and scipy.sparse, so a missing scipy still fails ``import cmm_d
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from typing import Any
 
 __all__ = ["brentq", "cubic_spline", "cumulative_simpson", "ellipj", "ellipk", "least_squares",
            "minimize", "minimize_scalar", "root", "solve_ivp"]
 
 
-def cubic_spline(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.interpolate.CubicSpline(*args, **kwargs)``."""
-    from scipy.interpolate import CubicSpline
+def _late(module: str, name: str) -> Callable[..., Any]:
+    """A function that calls ``module.name`` with its arguments, importing ``module`` on
+    its first call."""
+    def call(*args: Any, **kwargs: Any) -> Any:
+        return getattr(importlib.import_module(module), name)(*args, **kwargs)
 
-    return CubicSpline(*args, **kwargs)
-
-
-def least_squares(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.optimize.least_squares(*args, **kwargs)``."""
-    from scipy.optimize import least_squares as f
-
-    return f(*args, **kwargs)
+    call.__name__ = call.__qualname__ = name
+    call.__doc__ = f"``{module}.{name}(*args, **kwargs)``, imported on the first call."
+    return call
 
 
-def root(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.optimize.root(*args, **kwargs)``."""
-    from scipy.optimize import root as f
-
-    return f(*args, **kwargs)
-
-
-def minimize(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.optimize.minimize(*args, **kwargs)``."""
-    from scipy.optimize import minimize as f
-
-    return f(*args, **kwargs)
-
-
-def minimize_scalar(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.optimize.minimize_scalar(*args, **kwargs)``."""
-    from scipy.optimize import minimize_scalar as f
-
-    return f(*args, **kwargs)
-
-
-def brentq(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.optimize.brentq(*args, **kwargs)``."""
-    from scipy.optimize import brentq as f
-
-    return f(*args, **kwargs)
-
-
-def cumulative_simpson(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.integrate.cumulative_simpson(*args, **kwargs)``."""
-    from scipy.integrate import cumulative_simpson as f
-
-    return f(*args, **kwargs)
-
-
-def solve_ivp(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.integrate.solve_ivp(*args, **kwargs)``."""
-    from scipy.integrate import solve_ivp as f
-
-    return f(*args, **kwargs)
-
-
-def ellipj(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.special.ellipj(*args, **kwargs)``."""
-    from scipy.special import ellipj as f
-
-    return f(*args, **kwargs)
-
-
-def ellipk(*args: Any, **kwargs: Any) -> Any:
-    """``scipy.special.ellipk(*args, **kwargs)``."""
-    from scipy.special import ellipk as f
-
-    return f(*args, **kwargs)
+cubic_spline = _late("scipy.interpolate", "CubicSpline")
+least_squares = _late("scipy.optimize", "least_squares")
+root = _late("scipy.optimize", "root")
+minimize = _late("scipy.optimize", "minimize")
+minimize_scalar = _late("scipy.optimize", "minimize_scalar")
+brentq = _late("scipy.optimize", "brentq")
+cumulative_simpson = _late("scipy.integrate", "cumulative_simpson")
+solve_ivp = _late("scipy.integrate", "solve_ivp")
+ellipj = _late("scipy.special", "ellipj")
+ellipk = _late("scipy.special", "ellipk")
