@@ -9,6 +9,7 @@ the event policy, failure wrapping, the Result — is the driver's, once for all
 
 from __future__ import annotations
 
+import bisect
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -77,10 +78,15 @@ class Recorder:
     integrates those stretches over the samples).
 
     Kept as blocks of copies: a segment's rows are never views into the integrator's own
-    output (which holds the multipliers too and would stay alive with them)."""
+    output (which holds the multipliers too and would stay alive with them). Each block's
+    first sample index is kept beside it, so that a sample or the samples since an index
+    are found by bisection: walking every block from the first made each event's lookups
+    grow with the run (the valve train at output_dt 1e-4, 3 s, 1147 events: 0.84 of a
+    3.7-s run)."""
 
     def __init__(self) -> None:
         self._blocks: list[tuple[np.ndarray, ...]] = []
+        self._starts: list[int] = []  # each block's first sample index
         self._single: list[tuple[float, np.ndarray, np.ndarray, int]] = []
         self._n = 0
         # accelerations and multipliers of runs of samples, solved already (first index,
@@ -142,11 +148,11 @@ class Recorder:
     def at(self, i: int) -> tuple[float, np.ndarray, np.ndarray, int]:
         """Sample i: time, positions, velocities, configuration index."""
         self._flush()
-        for b in self._blocks:
-            if i < b[0].size:
-                return float(b[0][i]), b[1][i], b[2][i], int(b[3][i])
-            i -= b[0].size
-        raise IndexError("no such sample")
+        if not 0 <= i < self._n:
+            raise IndexError("no such sample")
+        k = bisect.bisect_right(self._starts, i) - 1
+        b, j = self._blocks[k], i - self._starts[k]
+        return float(b[0][j]), b[1][j], b[2][j], int(b[3][j])
 
     @property
     def last_t(self) -> float:
@@ -162,6 +168,7 @@ class Recorder:
     def _flush(self) -> None:
         if self._single:
             t, q, v, c = zip(*self._single, strict=True)
+            self._starts.append(self._n - len(t))
             self._blocks.append((np.array(t, dtype=float), np.array(q), np.array(v),
                                  np.array(c, dtype=int), np.full((len(t), NW), np.nan)))
             self._single = []
@@ -173,6 +180,7 @@ class Recorder:
         if t.size == 0:
             return
         self._flush()
+        self._starts.append(self._n)
         self._blocks.append((np.array(t, dtype=float), np.array(q, dtype=float),
                              np.array(v, dtype=float), np.full(t.size, c, dtype=int),
                              np.full((t.size, NW), np.nan) if work is None
@@ -183,13 +191,11 @@ class Recorder:
         """Times, positions and velocities of the samples from index ``n0`` on."""
         self._flush()
         rows: list[tuple] = []
-        start = 0
-        for b in self._blocks:
-            end = start + b[0].size
-            if end > n0:
+        first = max(bisect.bisect_right(self._starts, n0) - 1, 0)
+        for start, b in zip(self._starts[first:], self._blocks[first:], strict=True):
+            if start + b[0].size > n0:
                 k = max(n0 - start, 0)
                 rows.append((b[0][k:], b[1][k:], b[2][k:]))
-            start = end
         if not rows:
             return np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0))
         return tuple(np.concatenate([r[i] for r in rows]) for i in range(3))
@@ -197,14 +203,10 @@ class Recorder:
     def truncate(self, n: int) -> None:
         """Drop the samples from index ``n`` on (a stretch the run takes again)."""
         self._flush()
-        start, kept = 0, []
-        for b in self._blocks:
-            end = start + b[0].size
-            if start < n:
-                k = min(n, end) - start
-                kept.append(tuple(x[:k] for x in b))
-            start = end
-        self._blocks, self._n = kept, min(self._n, n)
+        kept = [tuple(x[:min(n, start + b[0].size) - start] for x in b)
+                for start, b in zip(self._starts, self._blocks, strict=True) if start < n]
+        self._blocks, self._starts = kept, self._starts[:len(kept)]
+        self._n = min(self._n, n)
         self._kkt = [(n0, a[:n - n0], lam[:n - n0]) for n0, a, lam in self._kkt if n0 < n]
 
     def arrays(self, nq: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -73,11 +73,15 @@ def _output_times(opts: RunOptions, t0: float) -> np.ndarray:
     if opts.output_dt is None:
         return np.array([opts.t_end])
     n = int(math.floor(opts.t_end / opts.output_dt + 1e-9))
-    grid = opts.output_dt * np.arange(1, n + 1)
     # An output time just after a segment start (an event a hair before a grid time) is
     # left out: IDA restarting toward an output 6e-11 s away failed on the double-folded
     # mechanism and the run ended as a dead point. The event's own sample stands in.
-    grid = grid[grid > t0 + ev.ZENO_DT * max(1.0, opts.t_end)]
+    after = t0 + ev.ZENO_DT * max(1.0, opts.t_end)
+    # the grid from a multiple or two before that on (the same products k output_dt):
+    # built from k = 1 at every segment, it grew with the events times the grid
+    k0 = max(1, min(n + 1, int(math.floor(after / opts.output_dt)) - 1))
+    grid = opts.output_dt * np.arange(k0, n + 1)
+    grid = grid[grid > after]
     if grid.size == 0 or grid[-1] < opts.t_end - 1e-12 * opts.t_end:
         grid = np.append(grid, opts.t_end)
     return grid
