@@ -274,21 +274,22 @@ def _decide_held(hs: HybridState, out: list[Transition], t: float) -> list[Trans
 
 
 def _release_jammed(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str,
-                    side: str) -> list[Transition]:
+                    side: str) -> tuple[list[Transition], bool]:
     """Before ``joint`` locks: if the lock would over-constrain (jam) the mechanism, the
     impact frees locks that it depends on: first joints held on their stops by a preloaded
     spring (force constraints: the impact beats the preload), then other locks (the impact
-    pulls them off their stops). One release event each, with the lock force just before."""
+    pulls them off their stops). One release event each, with the lock force just before.
+    Returns them and whether it still jams with nothing left to free (a lock-up)."""
     out: list[Transition] = []
     if not over_constrained(hs, {**hs.locked, joint: side}, q, t):
-        return out
+        return out, False
     order = sorted(hs.locked.items(), key=lambda kv: hs.force_held.get(kv[0]) != kv[1])
     for other, _ in order:
         force = hs.lock_force(q, v, t, other)
         out.append(Transition(release(hs, q, v, t, other, force), q, v))
         if not over_constrained(hs, {**hs.locked, joint: side}, q, t):
-            break
-    return out
+            return out, False
+    return out, True
 
 
 def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str, side: str,
@@ -302,9 +303,9 @@ def at_limit(hs: HybridState, q: np.ndarray, v: np.ndarray, t: float, joint: str
     the wrong sign releases at once (two events).
     """
     model = hs.model
-    out = _release_jammed(hs, q, v, t, joint, side)
+    out, jammed = _release_jammed(hs, q, v, t, joint, side)
     target = {**hs.locked, joint: side}
-    if over_constrained(hs, target, q, t):
+    if jammed:
         labels, _ = dependent_rows(model, q, t, hs.params_of(target), tol=1e-9)
         drivers = ", ".join(f"driver {d}" for d in model.driver_names) or "no driver"
         raise LockUpError(
