@@ -20,6 +20,9 @@ def _load(arg: str):
     return load(model_path(arg))
 
 
+#: Events a run's summary lists at most (the first and last halves; `events` lists all).
+SUMMARY_EVENTS = 40
+
 def _summary(res) -> None:
     s = res.stats
     how = f"{s.method}, in C" if res.meta.get("compiled") else s.method
@@ -34,7 +37,7 @@ def _summary(res) -> None:
         print(f"driver {name}: effort {d.low:.6g} (t = {d.t_low:.6g} s) .. {d.high:.6g} "
               f"(t = {d.t_high:.6g} s)")
     if res.events:
-        print(res.event_table())
+        print(res.event_table(limit=SUMMARY_EVENTS))
 
 
 def _refuse_overwrite(paths, force: bool) -> None:

@@ -439,3 +439,29 @@ def test_runs_use_one_blas_thread(monkeypatch):
     cache.clear()  # (built anew: a kept model of the same file has its start solved)
     cd.run_dae(cd.load(MODELS / "four_bar.toml"), 0.1)
     assert seen and seen[0] and set(seen[0]) == {1}
+
+
+def test_an_examples_file_name_where_no_such_file_is_names_the_example(tmp_path):
+    """The README lists the examples as files: `run double_folded.toml` outside the
+    repository says to give the name alone (it had read "cannot read the file")."""
+    r = cli("run", "double_folded.toml", "--t-end", "0.1", cwd=tmp_path)
+    assert r.returncode == 2
+    assert "the shipped example is run by its name alone: 'double_folded'" in \
+        one_line_error(r)
+    r = cli("run", "double_foldd.toml", cwd=tmp_path)  # no example: the loader's message
+    assert r.returncode == 2 and "cannot read the file" in one_line_error(r)
+
+
+def test_a_run_summary_lists_at_most_forty_events():
+    """A run of the valve train logs hundreds of events a second: the summary lists the
+    first 20 and the last 20 and says how many more there are; `events` and
+    Result.event_table() list them all."""
+    res = cd.run_dae(cd.load(cd.example("cam_valve_train")), 0.3, compiled=False)
+    n = len(res.events)
+    assert n > 40
+    full, short = res.event_table(), res.event_table(limit=40)
+    rows = [ln for ln in full.splitlines() if ln[:12].strip().replace(".", "").isdigit()]
+    kept = [ln for ln in short.splitlines() if ln[:12].strip().replace(".", "").isdigit()]
+    assert len(rows) == n and kept == rows[:20] + rows[-20:]
+    assert f"... {n - 40} events more" in short
+    assert res.event_table(limit=n) == full

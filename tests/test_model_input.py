@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -43,7 +44,8 @@ CASES = [
     ('connects = ["crank.B", "rod.B"]', 'connects = "crank.B"',
      r"\[joints\.B\] connects: expected two strings"),
     ('type = "revolute"\nconnects = ["crank.B"', 'type = "hinge"\nconnects = ["crank.B"',
-     r"\[joints\.B\] type: expected one of 'revolute', 'prismatic', 'contact', got 'hinge'"),
+     r"\[joints\.B\] type: expected one of 'revolute', 'prismatic', 'contact', 'gear', "
+     r"got 'hinge'"),
     ("axis = [1.0, 0.0]", "axis = [0.0, 0.0]", r"\[joints\.E\] axis: expected a non-zero"),
     ("axis = [1.0, 0.0]", "axis = [1.0]", r"\[joints\.E\] axis: expected a list of 2 numbers"),
     ('motion = "constant_speed"', 'motion = "constant_sped"',
@@ -146,7 +148,8 @@ def test_redundant_constraints(tmp_path):
 
 
 @pytest.mark.parametrize(("kw", "pattern"), [
-    ({"t_end": -1.0}, r"\[run\] t_end: expected a positive end time"),
+    ({"t_end": -1.0}, r"\[run\] t_end: expected a positive, finite end time"),
+    ({"t_end": math.inf}, r"\[run\] t_end: expected a positive, finite end time .*got inf"),
     ({"t_end": 1.0, "rtol": 0.5}, r"\[run\] rtol: expected 1e-15 <= rtol <= 1e-2"),
     ({"t_end": 1.0, "atol": 0.0}, r"\[run\] atol: expected 0 < atol"),
     ({"t_end": 1.0, "output_dt": -0.1}, r"\[run\] output_dt: expected a positive step"),

@@ -63,6 +63,12 @@ def example(name: str) -> Path:
 def model_path(arg: str) -> Path:
     """A model argument of the command line: an existing file, else an example's name."""
     path = Path(arg)
+    if not path.exists() and path.suffix == ".toml" and "/" not in arg and "\\" not in arg \
+            and path.stem in examples():
+        # a shipped example's file name typed where no such file is (the README lists the
+        # examples as files): the name alone finds it
+        raise CmmError(f"no file '{arg}' here; the shipped example is run by its name alone: "
+                       f"'{path.stem}'")
     if path.exists() or path.suffix or "/" in arg or "\\" in arg:
         return path  # a path (the loader says clearly if it cannot be read)
     return example(arg)

@@ -227,7 +227,8 @@ def _joint(r: _Reader, name: str, d: Any, spatial: bool = False) -> Joint:
     jtype = r.string(t, d, "type")
     types = SPATIAL_TYPES if spatial else JOINT_TYPES
     if jtype and jtype not in types and not (spatial and slide_base(name)):
-        r.bad(t, "type", f"expected one of {', '.join(map(repr, types))}, got {jtype!r}")
+        named = types if spatial else (*types, "gear")  # (a gear pair: a planar joint table)
+        r.bad(t, "type", f"expected one of {', '.join(map(repr, named))}, got {jtype!r}")
     first, second = _connects(r, t, d)
     curve, side, unilateral = contact_keys(r, t, d, jtype, spatial)
     axes = reference = None

@@ -60,7 +60,8 @@ _driver_error: str | None = None
 def _package_dir() -> Path:
     spec = util.find_spec("sksundae")
     if spec is None or spec.origin is None:  # a required dependency: fail at import
-        raise ImportError("cmm_dae needs scikit-sundae (pip install scikit-sundae)")
+        raise ImportError("cmm_dae needs scikit-sundae 1.2.x: pip install "
+                          "'scikit-sundae>=1.2,<1.3'")
     return Path(spec.origin).resolve().parent
 
 

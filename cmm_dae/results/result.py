@@ -304,13 +304,28 @@ class Result:
         return energy_audit(self)
 
     # ------------------------------------------------------------------ tables
-    def event_table(self) -> str:
-        """The event log as printable text."""
+    def event_table(self, limit: int | None = None) -> str:
+        """The event log as printable text.
+
+        Parameters
+        ----------
+        limit : int, optional
+            At most this many events: the first and the last half of them, with a line
+            saying how many were left out (a cam run of 10 s logs thousands). All where
+            None.
+        """
+        shown = list(self.events)
+        cut = limit is not None and len(shown) > limit
+        if cut:
+            shown = shown[:limit - limit // 2] + shown[len(shown) - limit // 2:]
         head = (f"{'t [s]':>12}  {'kind':<8} {'joint':<8} {'side':<6} "
                 f"{'configuration before -> after':<58} {'v- -> v+':>22} {'impulse':>10} "
                 f"{'E lost [J]':>11}")
         lines = [head, "-" * len(head)]
-        for e in self.events:
+        for k, e in enumerate(shown):
+            if cut and k == limit - limit // 2:
+                lines.append(f"... {len(self.events) - len(shown)} events more (all of "
+                             "them: cmm-dae events, or Result.event_table())")
             cb, ca = (self._config_text(i) for i in (e.before, e.after))
             imp = e.impulses.get(f"lock {e.joint}", 0.0)
             lines.append(f"{e.t:12.9f}  {e.kind:<8} {e.joint:<8} {e.side:<6} "
@@ -318,10 +333,14 @@ class Result:
                          f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
         if not self.events:
             lines.append("(no events)")
-        lines += [f"(singular at t = {e.t:.9f} s: {e.note})" for e in self.events
-                  if e.kind == "singular"]
+        singular = [e for e in shown if e.kind == "singular"]
+        if singular:
+            lines.append("(singular: v- -> v+ are the norm of all coordinates' velocities, m/s "
+                         "and rad/s together, where the crossing began and ended; they are "
+                         "continuous at the instant itself)")
+        lines += [f"(singular at t = {e.t:.9f} s: {e.note})" for e in singular]
         # a negative loss beyond round-off (a stick's vanishing impulse leaves ~1e-16 J)
-        if any(e.energy_lost < -1e-9 for e in self.events) and self.layout.drivers:
+        if any(e.energy_lost < -1e-9 for e in shown) and self.layout.drivers:
             lines.append("(E lost < 0: the driver's impulse does work at the impact, so the "
                          "mechanism can gain kinetic energy there)")
         return "\n".join(lines)

@@ -88,7 +88,7 @@ def check_options(mech: Mechanism, method: str, t_end: Any, *, rtol: Any, atol: 
         bad.append(Problem("run", "method", f"expected one of {', '.join(METHOD_NAMES)}, "
                            f"got {method!r}"))
     ok_t = need(_is_num(t_end) and math.isfinite(t_end) and t_end > 0, "t_end",
-                "expected a positive end time in s", t_end)
+                "expected a positive, finite end time in s", t_end)
     if ok_t and method == "ida" and t_end < ev.ZENO_DT:
         # IDA's first steps would be ~1e-24 s, where the index-2 Newton matrix (mass / h
         # beside the constraint rows) cannot be solved: it failed at t = 0 on a four-bar
