@@ -16,10 +16,12 @@ from scipy.linalg import eigh, eigvals_banded, qr
 from scipy.linalg import null_space as _null_space
 from scipy.linalg.lapack import dpbtrs
 
+from ..core.memo import once
 from . import banded, bandsvd
+from .model import Model
 
 __all__ = ["COLLAPSE", "GRAM_FROM", "RANK_TOL", "collapsed", "collapsed_band", "collapsed_gram",
-           "count_collapsed", "dependent", "null_space", "rank", "ratio"]
+           "count_collapsed", "dependent", "loop_free", "null_space", "rank", "ratio"]
 
 #: Relative size (to the largest) below which a singular value counts as zero: the
 #: numerical rank, dependent rows, the null space. Rows this close to dependent cannot be
@@ -158,3 +160,49 @@ def _top(low: np.ndarray) -> float:
     lam = eigvals_banded(low, lower=True, select="i", select_range=(low.shape[1] - 1,
                                                                     low.shape[1] - 1))
     return float(lam[-1]) if lam.size else 0.0
+
+
+def loop_free(model: Model, act: np.ndarray) -> bool:
+    """Whether the active rows ``act`` belong to joints (with their locks and drivers)
+    that close no loop: each joins two bodies that no chain of the others joins already.
+
+    Such rows have full rank at every position: each joint's rows fix its second body's
+    motion relative to its first in the directions the joint does not free, so the
+    Jacobian of a tree is block triangular with blocks of full rank. No singular position
+    can be passed there, and the stepped-over screen has nothing to look for (a cam
+    follower in flight: two thirds of the valve train's segments). Gear rows, rows of
+    another kind, or a lock beside a driver on one joint count as a loop (screened).
+    Kept per model and set of rows."""
+    return once(model, ("loop_free", act.tobytes()), lambda: _loop_free(model, act))
+
+
+def _loop_free(model: Model, act: np.ndarray) -> bool:
+    mech = model.mech
+    kinds: dict[str, set[str]] = {}  # joint (a slide as its joint) -> kinds of its rows
+    for i in act:
+        row = model.rows[int(i)]
+        if row.kind == "body":  # a spatial body's own rows (its axes orthonormal)
+            continue
+        if row.kind == "driver":
+            name = mech.drivers[row.name].joint
+        elif row.kind in ("joint", "lock"):
+            name = row.name
+        else:
+            return False
+        kinds.setdefault(name.split(":")[0], set()).add(row.kind)
+    root: dict[str, str] = {}
+
+    def find(x: str) -> str:
+        while root.get(x, x) != x:
+            x = root[x]
+        return x
+
+    for name, k in kinds.items():
+        joint = mech.joints.get(name)
+        if joint is None or {"lock", "driver"} <= k:
+            return False
+        a, b = (find(end.split(".")[0]) for end in (joint.first, joint.second))
+        if a == b:  # a second chain between them: a loop
+            return False
+        root[a] = b
+    return True

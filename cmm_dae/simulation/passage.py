@@ -19,6 +19,7 @@ import numpy as np
 
 from ..equations.kinematics import singular_ratio
 from ..equations.model import Model
+from ..equations.rank import loop_free
 from ..integrators.contract import Recorder, SegmentEnd
 from ..singular.instant import grid_bracket, hermite
 from ..singular.tip import interval_instant, sample_instant
@@ -145,9 +146,9 @@ def passages(model: Model, p: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.nd
         minimum below :data:`WATCH_RATIO`.
     """
     n = t.size
-    if n < 2:
-        return []
     act = model.active_rows(p)
+    if n < 2 or loop_free(model, act):  # (no singular position where no loop closes)
+        return []
     known = SampleRatios(model, p, t, q, act, exact_only=start)
     ratios, r, exceeds = known.exact, known.r, known.exceeds
     found: list[Passage] = []
