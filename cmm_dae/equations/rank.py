@@ -170,8 +170,8 @@ def loop_free(model: Model, act: np.ndarray) -> bool:
     motion relative to its first in the directions the joint does not free, so the
     Jacobian of a tree is block triangular with blocks of full rank. No singular position
     can be passed there, and the stepped-over screen has nothing to look for (a cam
-    follower in flight: two thirds of the valve train's segments). Gear rows, rows of
-    another kind, or a lock beside a driver on one joint count as a loop (screened).
+    follower in flight: 3181 of the valve train's 3819 segments over 10 s). Gear rows,
+    rows of another kind, or a lock beside a driver on one joint count as a loop.
     Kept per model and set of rows."""
     return once(model, ("loop_free", act.tobytes()), lambda: _loop_free(model, act))
 
