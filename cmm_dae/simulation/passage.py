@@ -325,6 +325,8 @@ def stepped_over(model: Model, p: np.ndarray, t: float, q: np.ndarray, v: np.nda
     interval is left out when the segment ended at a singular position: the crossing
     from there takes it.
     """
+    if loop_free(model, model.active_rows(p)):  # (before the samples are gathered)
+        return []
     ts, qs, vs = _samples(t, q, v, rec, n0, end)
     out = []
     for ps in passages(model, p, ts, qs, vs, skip_last=end.reason == "singular",
