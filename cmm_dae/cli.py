@@ -122,7 +122,8 @@ def _viewing(sub) -> None:
     """``events``, ``structure``, ``animate``, ``plot``."""
     e = sub.add_parser("events", help="event table of a model run or of a saved result")
     e.add_argument("source", help="model file or example name, or a saved result (.npz)")
-    e.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    e.add_argument("--t-end", type=float, default=None,
+                   help="end time for a model, s (10; not for a saved result)")
     e.add_argument("--rtol", type=float, default=None,
                    help="IDA relative tolerance for a model (1e-8, as run's)")
     e.set_defaults(func=_events)
@@ -134,7 +135,8 @@ def _viewing(sub) -> None:
     a = sub.add_parser("animate", help="GIF of the mechanism moving (locked joints in red)")
     a.add_argument("source", help="model file or example name, or a saved result (.npz)")
     a.add_argument("--out", required=True, help="output .gif")
-    a.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    a.add_argument("--t-end", type=float, default=None,
+                   help="end time for a model, s (10; not for a saved result)")
     a.add_argument("--fps", type=int, default=20, help="frames per second (20)")
     a.add_argument("--frames", type=int, default=120, help="most frames (120)")
     a.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -143,7 +145,8 @@ def _viewing(sub) -> None:
     p = sub.add_parser("plot", help="paper-style figures of one run")
     p.add_argument("source", help="model file or example name, or a saved result (.npz)")
     p.add_argument("--out", required=True, help="directory for the PNGs")
-    p.add_argument("--t-end", type=float, default=10.0, help="end time for a model, s")
+    p.add_argument("--t-end", type=float, default=None,
+                   help="end time for a model, s (10; not for a saved result)")
     p.add_argument("--force", action="store_true", help="overwrite existing PNGs")
     p.set_defaults(func=_plot)
 

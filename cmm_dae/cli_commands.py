@@ -147,17 +147,23 @@ def _compare(args: argparse.Namespace) -> int:
     return 0 if all(r.success for r in res) else 3
 
 
-def _result_of(source: str, t_end: float, rtol: float | None = None):
-    """A saved Result (.npz) or a run of a model file (.toml) to ``t_end`` (at ``rtol``,
-    or the default); anything else is refused."""
+def _result_of(source: str, t_end: float | None, rtol: float | None = None):
+    """A saved Result (.npz) or a run of a model file (.toml) to ``t_end`` (10 s where
+    None; at ``rtol``, or the default); anything else is refused, and so are a ``t_end``
+    or an ``rtol`` given for a saved result (its run is over: they would be ignored)."""
     from . import load_result, simulate
     from .description.library import model_path
 
     path = model_path(source)
     if path.suffix == ".npz" or _is_zip(path):  # (Result.save writes any name it is given)
-        return load_result(path)
+        res = load_result(path)
+        if t_end is not None or rtol is not None:
+            raise CmmError(f"'{source}' is a saved result (its run ended at "
+                           f"t = {res.t[-1]:g} s): --t-end and --rtol set a model's run")
+        return res
     if path.suffix == ".toml":
-        return simulate(_load(str(path)), t_end, **({} if rtol is None else {"rtol": rtol}))
+        return simulate(_load(str(path)), 10.0 if t_end is None else t_end,
+                        **({} if rtol is None else {"rtol": rtol}))
     raise CmmError(f"'{source}': expected a model file (.toml) or a saved result (.npz), "
                    f"not a '{path.suffix or 'suffix-less'}' file")
 

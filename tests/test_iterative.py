@@ -103,6 +103,10 @@ def test_cli_commands(tmp_path):
     assert "limit" in r.stdout and "external collision (joint O)" in r.stdout
     r = cli("events", str(tmp_path / "r.npz"))
     assert r.returncode == 0 and "limit" in r.stdout
+    # a saved run is over: an end time or rtol for it is refused, not ignored
+    r = cli("events", str(tmp_path / "r.npz"), "--t-end", "5")
+    assert r.returncode == 2 and "is a saved result (its run ended at t = 1 s)" in r.stderr
+    assert "Traceback" not in r.stderr
     r = cli("iterate", "models/slider_crank.toml", "--t-end", "0.5", "--dt", "0.01")
     assert r.returncode == 0 and "(iterative)" in r.stdout
     r = cli("structure", "models/slider_crank_stop.toml")
