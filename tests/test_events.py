@@ -268,7 +268,9 @@ def test_event_table_text():
     table = res.event_table()
     assert "limit" in table and "release" in table
     assert "non-collision -> external collision (joint E) [E]" in table
-    assert len(table.splitlines()) == 2 + len(res.events)
+    # header, rule, one line an event, and the impulse column's meaning (an impact's)
+    assert len(table.splitlines()) == 2 + len(res.events) + 1
+    assert table.splitlines()[-1].startswith("(impulse: the lock row's multiplier impulse")
 
 
 def test_lock_of_wrong_sign_releases_at_once():

@@ -105,7 +105,10 @@ class Event:
     velocity_before, velocity_after : float
         Joint coordinate rate just before and after, rad/s or m/s.
     impulses : dict[str, float]
-        Impulse carried by each constraint row label, N s (or N m s).
+        Impulse carried by each constraint row label, N s (or N m s): the row's multiplier
+        impulse Lambda in the impact map (``M v+ + Phi_q^T Lambda = M v-``), so a stop
+        gives its joint ``-Lambda`` along the joint's coordinate (a lower stop's is
+        negative, an upper stop's positive).
     energy_lost : float
         Kinetic energy lost in the impact, J.
     release_force : float

@@ -333,6 +333,9 @@ class Result:
                          f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
         if not self.events:
             lines.append("(no events)")
+        if any(e.impulses.get(f"lock {e.joint}", 0.0) for e in shown):
+            lines.append("(impulse: the lock row's multiplier impulse, N s or N m s; the stop "
+                         "gives -impulse along the joint's coordinate)")
         singular = [e for e in shown if e.kind == "singular"]
         if singular:
             lines.append("(singular: v- -> v+ are the norm of all coordinates' velocities, m/s "
