@@ -465,3 +465,5 @@ def test_a_run_summary_lists_at_most_forty_events():
     assert len(rows) == n and kept == rows[:20] + rows[-20:]
     assert f"... {n - 40} events more" in short
     assert res.event_table(limit=n) == full
+    for limit in (0, 1):  # (no last half: the count still said)
+        assert f"... {n - limit} events more" in res.event_table(limit=limit)

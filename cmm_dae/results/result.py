@@ -314,26 +314,28 @@ class Result:
             saying how many were left out (a cam run of 10 s logs thousands). All where
             None.
         """
-        shown = list(self.events)
-        cut = limit is not None and len(shown) > limit
-        if cut:
-            shown = shown[:limit - limit // 2] + shown[len(shown) - limit // 2:]
+        first, last = list(self.events), []
+        if limit is not None and len(first) > limit:  # the first and the last halves
+            first, last = first[:limit - limit // 2], first[len(first) - limit // 2:]
+        shown = first + last
         head = (f"{'t [s]':>12}  {'kind':<8} {'joint':<8} {'side':<6} "
                 f"{'configuration before -> after':<58} {'v- -> v+':>22} {'impulse':>10} "
                 f"{'E lost [J]':>11}")
         lines = [head, "-" * len(head)]
-        for k, e in enumerate(shown):
-            if cut and k == limit - limit // 2:
-                lines.append(f"... {len(self.events) - len(shown)} events more (all of "
-                             "them: cmm-dae events, or Result.event_table())")
+        impulses = [e.impulses.get(f"lock {e.joint}", 0.0) for e in shown]
+        rows = []
+        for e, imp in zip(shown, impulses, strict=True):
             cb, ca = (self._config_text(i) for i in (e.before, e.after))
-            imp = e.impulses.get(f"lock {e.joint}", 0.0)
-            lines.append(f"{e.t:12.9f}  {e.kind:<8} {e.joint:<8} {e.side:<6} "
-                         f"{cb + ' -> ' + ca:<58} {e.velocity_before:>10.4g} -> "
-                         f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
+            rows.append(f"{e.t:12.9f}  {e.kind:<8} {e.joint:<8} {e.side:<6} "
+                        f"{cb + ' -> ' + ca:<58} {e.velocity_before:>10.4g} -> "
+                        f"{e.velocity_after:<9.4g} {imp:>10.4g} {e.energy_lost:>11.4g}")
+        if len(shown) < len(self.events):
+            rows.insert(len(first), f"... {len(self.events) - len(shown)} events more (all "
+                        "of them: cmm-dae events, or Result.event_table())")
+        lines += rows
         if not self.events:
             lines.append("(no events)")
-        if any(e.impulses.get(f"lock {e.joint}", 0.0) for e in shown):
+        if any(impulses):
             lines.append("(impulse: the lock row's multiplier impulse, N s or N m s; the stop "
                          "gives -impulse along the joint's coordinate)")
         singular = [e for e in shown if e.kind == "singular"]
