@@ -17,6 +17,7 @@ from scipy.linalg import null_space as _null_space
 from scipy.linalg.lapack import dpbtrs
 
 from ..core.memo import once
+from ..description.records import slide_base
 from . import banded, bandsvd
 from .model import Model
 
@@ -173,7 +174,8 @@ def loop_free(model: Model, act: np.ndarray) -> bool:
     follower in flight: 3181 of the valve train's 3819 segments over 10 s). Gear rows,
     rows of another kind, or a lock beside a driver on one joint count as a loop.
     Kept per model and set of rows."""
-    return once(model, ("loop_free", act.tobytes()), lambda: _loop_free(model, act))
+    # (a property of the structure: kept on the model its variants share)
+    return once(model.shared, ("loop_free", act.tobytes()), lambda: _loop_free(model, act))
 
 
 def _loop_free(model: Model, act: np.ndarray) -> bool:
@@ -189,7 +191,7 @@ def _loop_free(model: Model, act: np.ndarray) -> bool:
             name = row.name
         else:
             return False
-        kinds.setdefault(name.split(":")[0], set()).add(row.kind)
+        kinds.setdefault(slide_base(name) or name, set()).add(row.kind)
     root: dict[str, str] = {}
 
     def find(x: str) -> str:
@@ -201,7 +203,7 @@ def _loop_free(model: Model, act: np.ndarray) -> bool:
         joint = mech.joints.get(name)
         if joint is None or {"lock", "driver"} <= k:
             return False
-        a, b = (find(end.split(".")[0]) for end in (joint.first, joint.second))
+        a, b = find(joint.first_body), find(joint.second_body)
         if a == b:  # a second chain between them: a loop
             return False
         root[a] = b
