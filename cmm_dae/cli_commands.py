@@ -23,6 +23,7 @@ def _load(arg: str):
 #: Events a run's summary lists at most (the first and last halves; `events` lists all).
 SUMMARY_EVENTS = 40
 
+
 def _summary(res) -> None:
     s = res.stats
     how = f"{s.method}, in C" if res.meta.get("compiled") else s.method

@@ -55,8 +55,6 @@ _driver: ctypes.CDLL | None = None
 _driver_error: str | None = None
 
 
-#: scikit-sundae's package directory, found without importing it (its import loads
-#: scipy.optimize; the driver finds the SUNDIALS libraries by its rpath)
 def _package_dir() -> Path:
     spec = util.find_spec("sksundae")
     if spec is None or spec.origin is None:  # a required dependency: fail at import
@@ -65,6 +63,8 @@ def _package_dir() -> Path:
     return Path(spec.origin).resolve().parent
 
 
+#: scikit-sundae's package directory, found without importing it (its import loads
+#: scipy.optimize; the driver finds the SUNDIALS libraries by its rpath)
 _SKSUNDAE = _package_dir()
 
 

@@ -50,7 +50,6 @@ from .tolerances import ATOL_LAMBDA, lambda_atol, tolerances
 PUSH_MARGIN = 0.1
 
 
-
 class IdaIntegrator(IdaCallbacks, Integrator):
     """IDA on the GGL index-2 residual, one solver per configuration segment."""
 
