@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from iftomm import OUT, _ida_on, minimal_a02  # noqa: E402
+from iftomm import OUT, minimal_a02  # noqa: E402
 
 import cmm_dae as cd  # noqa: E402
 from cmm_dae.description import iftomm  # noqa: E402
@@ -54,30 +54,6 @@ def energy_changes(res: cd.Result) -> tuple[float, float]:
     return across, within
 
 
-def minimal_restarted(n: int, t_end: float, rtol: float, atol: float,
-                      cuts: list[float]) -> float:
-    """The tip's largest error of IDA on A02's one-DOF residual (as ``minimal_a02``) run
-    piecewise: a fresh IDA from the state reached at each time of ``cuts`` (s)."""
-    inertia = (n + 1) / 3.0 + n
-    weight = ((n + 1) / 2.0 + n) * iftomm.G
-
-    def res(t, y, yp, r):
-        r[0] = yp[0] - y[1]
-        r[1] = yp[1] + weight * np.cos(y[0]) / inertia
-
-    y, worst = np.array([np.pi / 2, -1.0]), 0.0
-    bounds = [0.0] + [c for c in cuts if 0.0 < c < t_end] + [t_end]
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-        grid = np.append(np.arange(a, b, 0.01), b)
-        sol, _ = _ida_on(res, y, np.array([y[1], -weight * np.cos(y[0]) / inertia]), grid,
-                         rtol, atol=atol)
-        tip = np.column_stack([np.cos(sol.y[:, 0]), np.sin(sol.y[:, 0])])
-        worst = max(worst, float(np.max(np.hypot(
-            *(tip - iftomm.a02_reference(n, sol.t)).T))))
-        y = sol.y[-1].copy()
-    return worst
-
-
 def rows(n: int, t_end: float) -> list[dict]:
     mech = iftomm.a02_four_bar(n)
     out = []
@@ -93,9 +69,8 @@ def rows(n: int, t_end: float) -> list[dict]:
                             crossings=sum(e.kind == "singular" for e in res.events),
                             across=across, within=within,
                             minimal=minimal_a02(n, t_end, rtol, atol)[1],
-                            restarted=minimal_restarted(
-                                n, t_end, rtol, atol,
-                                [e.t for e in res.events if e.kind == "singular"])))
+                            restarted=minimal_a02(n, t_end, rtol, atol, tuple(
+                                e.t for e in res.events if e.kind == "singular"))[1]))
             print(_row(out[-1]), flush=True)
     return out
 
